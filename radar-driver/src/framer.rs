@@ -1,0 +1,419 @@
+//! The streaming framer: bytes in arbitrary chunks -> checked frames.
+//!
+//! Rules (each one answers a failure of other parsers):
+//! * A frame is released as soon as its totalPacketLen bytes are in; the framer never waits for
+//!   the next magic word.
+//! * Before that, if the next frame's magic appears inside the claimed length, the frame is
+//!   reported [`FrameError::Truncated`] at once and the next frame is framed from its magic.
+//! * Any other failure drops only the 8 magic bytes and searches again.
+//! * totalPacketLen is bounded by the buffer (and an optional lower maximum).
+//! * Every byte is accounted for: `bytes_in == bytes_in_good_frames + bytes_skipped + buffered()`.
+//!
+//! The buffer is a `heapless::Vec<u8, N>`: no allocation, so the same code runs on a
+//! microcontroller. When the buffer is empty and a whole frame sits in the input chunk, the frame
+//! is a view into the input (no copy).
+
+use crate::error::{FrameError, FRAME_ERROR_KINDS};
+use crate::frame::{
+    detect, find_magic, find_magic_or_prefix, Detect, Frame, Layout, LayoutHint, MAGIC,
+};
+
+/// Default buffer size for host use [B]: larger than any frame that fits a 10 fps UART budget.
+pub const DEFAULT_MAX_FRAME: usize = 64 * 1024;
+
+/// What one [`Framer::poll`] call produced.
+#[derive(Debug)]
+pub enum Poll<'a> {
+    /// A checked frame. It borrows the framer: drop it before polling again.
+    Frame(Frame<'a>),
+    /// A candidate frame was rejected and `skipped` bytes were dropped because of it.
+    Dropped {
+        /// Why.
+        error: FrameError,
+        /// Bytes dropped for it (the magic, or the truncated frame's bytes) [B].
+        skipped: usize,
+    },
+    /// The input is used up: feed more bytes.
+    NeedMore,
+}
+
+/// Counters since the framer was created. Nothing is dropped without being counted here.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Counters {
+    /// Bytes consumed from the input [B].
+    pub bytes_in: u64,
+    /// Frames released.
+    pub frames_ok: u64,
+    /// Bytes in released frames [B].
+    pub bytes_ok: u64,
+    /// Rejected candidates, indexed by [`FrameError::kind_index`].
+    pub frames_bad: [u64; FRAME_ERROR_KINDS],
+    /// Bytes not part of any released frame: junk between frames, dropped magics, truncated
+    /// frames [B].
+    pub bytes_skipped: u64,
+    /// Times the framer had to search for a magic word where a frame should have started
+    /// (junk before a frame, or after a rejected candidate).
+    pub resyncs: u64,
+}
+
+impl Counters {
+    /// Total rejected candidates.
+    pub fn frames_bad_total(&self) -> u64 {
+        self.frames_bad.iter().sum()
+    }
+}
+
+/// Result of looking at a window that may start with a frame.
+enum Step {
+    /// `n` bytes at the start hold no magic (not even a prefix of one).
+    Skip(usize),
+    /// The window starts with a candidate that needs at least this many bytes.
+    NeedMore(usize),
+    /// The window starts with a good frame of this layout and length.
+    Frame(Layout, usize),
+    /// The candidate is bad; drop this many bytes.
+    Drop(FrameError, usize),
+}
+
+/// Streaming framer with an `N`-byte buffer (the largest frame it can hold).
+#[derive(Debug)]
+pub struct Framer<const N: usize> {
+    buf: heapless::Vec<u8, N>,
+    /// Length of the frame handed out from `buf` by the last poll; removed at the next poll.
+    release: usize,
+    /// Offset in the current candidate up to which the inner-magic scan has run.
+    scanned: usize,
+    hint: LayoutHint,
+    locked: Option<Layout>,
+    streak: (Option<Layout>, u8),
+    max_len: usize,
+    /// True when the last thing seen was a good frame (junk after it is a new loss of sync).
+    in_sync: bool,
+    counters: Counters,
+}
+
+impl<const N: usize> Default for Framer<N> {
+    fn default() -> Self {
+        Self::new(LayoutHint::Auto)
+    }
+}
+
+impl<const N: usize> Framer<N> {
+    /// A framer for frames of the given layout (or [`LayoutHint::Auto`]).
+    pub fn new(hint: LayoutHint) -> Self {
+        Framer {
+            buf: heapless::Vec::new(),
+            release: 0,
+            scanned: 0,
+            hint,
+            locked: None,
+            streak: (None, 0),
+            max_len: N,
+            in_sync: true,
+            counters: Counters::default(),
+        }
+    }
+
+    /// Lowers the largest accepted totalPacketLen below the buffer size [B] (for example to the
+    /// bound a .cfg implies).
+    pub fn with_max_len(mut self, max_len: usize) -> Self {
+        self.max_len = max_len.min(N);
+        self
+    }
+
+    /// Counters so far.
+    pub fn counters(&self) -> &Counters {
+        &self.counters
+    }
+
+    /// Bytes held for an incomplete candidate [B].
+    pub fn buffered(&self) -> usize {
+        self.buf.len() - self.release
+    }
+
+    /// The layout the framer has settled on in auto mode (after two good frames in a row).
+    pub fn locked_layout(&self) -> Option<Layout> {
+        match self.hint {
+            LayoutHint::Fixed(l) => Some(l),
+            LayoutHint::Auto => self.locked,
+        }
+    }
+
+    /// Consumes bytes from `input` (advancing it) until a frame is complete, a candidate is
+    /// rejected, or the input is used up.
+    ///
+    /// ```
+    /// use radar_driver::{Framer, Poll, encode::FrameBuilder};
+    /// let mut bytes = [0u8; 96];
+    /// let n = FrameBuilder::oob(0x0303_0002, 0xA6843, 1).write(&mut bytes).unwrap();
+    /// let mut framer: Framer<1024> = Framer::default();
+    /// let mut input = &bytes[..n];
+    /// match framer.poll(&mut input) {
+    ///     Poll::Frame(f) => assert_eq!(f.header().frame_number, 1),
+    ///     other => panic!("{other:?}"),
+    /// }
+    /// assert!(matches!(framer.poll(&mut input), Poll::NeedMore));
+    /// ```
+    pub fn poll<'r, 'i: 'r>(&'r mut self, input: &mut &'i [u8]) -> Poll<'r> {
+        if self.release > 0 {
+            let n = self.release;
+            self.buf_drain(n);
+            self.release = 0;
+        }
+        loop {
+            if self.buf.is_empty() {
+                let window: &'i [u8] = input;
+                if window.is_empty() {
+                    return Poll::NeedMore;
+                }
+                match self.step(window) {
+                    Step::Skip(n) => {
+                        *input = &window[n..];
+                        self.consumed(n);
+                        self.skip(n);
+                    }
+                    Step::Frame(layout, len) => {
+                        *input = &window[len..];
+                        self.consumed(len);
+                        self.good(layout, len);
+                        return Poll::Frame(Frame::trusted(&window[..len], layout));
+                    }
+                    Step::Drop(error, n) => {
+                        *input = &window[n..];
+                        self.consumed(n);
+                        return self.dropped(error, n);
+                    }
+                    Step::NeedMore(_) => {
+                        // The whole window is an incomplete candidate shorter than N: keep it.
+                        let keep = window.len().min(N);
+                        let _ = self.buf.extend_from_slice(&window[..keep]);
+                        *input = &window[keep..];
+                        self.consumed(keep);
+                        if input.is_empty() {
+                            return Poll::NeedMore;
+                        }
+                    }
+                }
+            } else {
+                let step = self.step_buf();
+                match step {
+                    Step::Skip(n) => {
+                        self.buf_drain(n);
+                        self.skip(n);
+                    }
+                    Step::Frame(layout, len) => {
+                        self.release = len;
+                        self.good(layout, len);
+                        return Poll::Frame(Frame::trusted(&self.buf[..len], layout));
+                    }
+                    Step::Drop(error, n) => {
+                        self.buf_drain(n);
+                        return self.dropped(error, n);
+                    }
+                    Step::NeedMore(need) => {
+                        if input.is_empty() {
+                            return Poll::NeedMore;
+                        }
+                        let want = need.saturating_sub(self.buf.len()).max(1);
+                        let room = N - self.buf.len();
+                        let take = want.min(input.len()).min(room);
+                        if take == 0 {
+                            // Cannot happen: need <= max_len <= N. Drop the candidate rather than spin.
+                            let n = self.buf.len().min(MAGIC.len());
+                            self.buf_drain(n);
+                            return self.dropped(
+                                FrameError::LengthTooLarge {
+                                    len: need as u32,
+                                    max: self.max_len as u32,
+                                },
+                                n,
+                            );
+                        }
+                        let _ = self.buf.extend_from_slice(&input[..take]);
+                        *input = &input[take..];
+                        self.consumed(take);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Ends the stream: an incomplete candidate still buffered is reported as truncated (or, if
+    /// it is only part of a magic word, counted as skipped). Returns the drop, if any.
+    pub fn finish(&mut self) -> Option<(FrameError, usize)> {
+        if self.release > 0 {
+            let n = self.release;
+            self.buf_drain(n);
+            self.release = 0;
+        }
+        let n = self.buf.len();
+        if n == 0 {
+            return None;
+        }
+        let error = if n >= 16 {
+            let claimed = self.candidate_len().unwrap_or(0);
+            FrameError::Truncated {
+                claimed,
+                got: n as u32,
+            }
+        } else {
+            FrameError::BufferTooShort { need: 16, have: n }
+        };
+        self.buf.clear();
+        self.scanned = 0;
+        if let Poll::Dropped { error, skipped } = self.dropped(error, n) {
+            return Some((error, skipped));
+        }
+        None
+    }
+
+    fn candidate_len(&self) -> Option<u32> {
+        let l = self.locked_layout().unwrap_or(Layout::Oob40);
+        l.claimed_len(&self.buf)
+    }
+
+    fn step_buf(&mut self) -> Step {
+        let buf = core::mem::take(&mut self.buf);
+        let s = self.step(&buf);
+        self.buf = buf;
+        s
+    }
+
+    /// Looks at a window that starts wherever the previous candidate ended.
+    fn step(&mut self, w: &[u8]) -> Step {
+        match find_magic_or_prefix(w) {
+            None => return Step::Skip(w.len()),
+            Some(0) => {}
+            Some(i) => return Step::Skip(i),
+        }
+        if w.len() < MAGIC.len() {
+            return Step::NeedMore(MAGIC.len());
+        }
+        let hint = match self.locked_layout() {
+            Some(l) => LayoutHint::Fixed(l),
+            None => LayoutHint::Auto,
+        };
+        let (layout, claimed) = match detect(w, hint) {
+            Detect::NeedMore(n) => return self.need_more_or_truncated(w, n, None),
+            Detect::Bad(e) => return Step::Drop(e, MAGIC.len()),
+            Detect::Found(l, len) => (l, len),
+        };
+        let total = claimed as usize;
+        if total > self.max_len {
+            return Step::Drop(
+                FrameError::LengthTooLarge {
+                    len: claimed,
+                    max: self.max_len as u32,
+                },
+                MAGIC.len(),
+            );
+        }
+        if w.len() < total {
+            return self.need_more_or_truncated(w, total, Some(claimed));
+        }
+        if let Some(k) = self.inner_magic(&w[..total]) {
+            self.scanned = 0;
+            return Step::Drop(
+                FrameError::Truncated {
+                    claimed,
+                    got: k as u32,
+                },
+                k,
+            );
+        }
+        self.scanned = 0;
+        match Frame::new_checked(&w[..total], layout) {
+            Ok(_) => Step::Frame(layout, total),
+            Err(e) => Step::Drop(e, MAGIC.len()),
+        }
+    }
+
+    fn need_more_or_truncated(&mut self, w: &[u8], need: usize, claimed: Option<u32>) -> Step {
+        if let Some(k) = self.inner_magic(w) {
+            self.scanned = 0;
+            let claimed = claimed.unwrap_or(need as u32);
+            return Step::Drop(
+                FrameError::Truncated {
+                    claimed,
+                    got: k as u32,
+                },
+                k,
+            );
+        }
+        Step::NeedMore(need)
+    }
+
+    /// Offset of a magic word after the candidate's own, scanning only bytes not scanned before.
+    fn inner_magic(&mut self, w: &[u8]) -> Option<usize> {
+        let from = self.scanned.saturating_sub(MAGIC.len() - 1).max(1);
+        let found = w.get(from..).and_then(find_magic).map(|k| k + from);
+        self.scanned = w.len();
+        found
+    }
+
+    fn buf_drain(&mut self, n: usize) {
+        let n = n.min(self.buf.len());
+        self.buf.copy_within(n.., 0);
+        self.buf.truncate(self.buf.len() - n);
+        self.scanned = 0;
+    }
+
+    fn consumed(&mut self, n: usize) {
+        self.counters.bytes_in += n as u64;
+    }
+
+    fn skip(&mut self, n: usize) {
+        if n == 0 {
+            return;
+        }
+        self.counters.bytes_skipped += n as u64;
+        if self.in_sync {
+            self.counters.resyncs += 1;
+            self.in_sync = false;
+        }
+    }
+
+    fn good(&mut self, layout: Layout, len: usize) {
+        self.counters.frames_ok += 1;
+        self.counters.bytes_ok += len as u64;
+        note_good(
+            &mut self.streak,
+            &mut self.locked,
+            &mut self.in_sync,
+            self.hint,
+            layout,
+        );
+    }
+
+    fn dropped<'r>(&mut self, error: FrameError, skipped: usize) -> Poll<'r> {
+        self.counters.frames_bad[error.kind_index()] += 1;
+        self.counters.bytes_skipped += skipped as u64;
+        if self.in_sync {
+            self.counters.resyncs += 1;
+        }
+        self.in_sync = false;
+        self.streak = (None, 0);
+        Poll::Dropped { error, skipped }
+    }
+}
+
+fn note_good(
+    streak: &mut (Option<Layout>, u8),
+    locked: &mut Option<Layout>,
+    in_sync: &mut bool,
+    hint: LayoutHint,
+    layout: Layout,
+) {
+    *in_sync = true;
+    if hint != LayoutHint::Auto || locked.is_some() {
+        return;
+    }
+    if streak.0 == Some(layout) {
+        streak.1 = streak.1.saturating_add(1);
+    } else {
+        *streak = (Some(layout), 1);
+    }
+    if streak.1 >= 2 {
+        *locked = Some(layout);
+    }
+}

@@ -1,0 +1,73 @@
+//! From a frame to a point cloud: the points of whichever point TLV the frame carries, in
+//! Cartesian metres and m/s, with side info and the list of TLVs seen.
+
+use crate::error::TlvError;
+use crate::frame::Frame;
+use crate::tlv::{Dialect, Point, Target, Tlv};
+
+/// The decoded content of one frame that egomotion and the dump care about.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PointCloud {
+    /// Points (x right, y boresight, z up [m]; radial velocity [m/s]).
+    pub points: Vec<Point>,
+    /// False when the velocities could not be scaled (SDK 1/2 Doppler indices without a .cfg);
+    /// the velocities are then NaN.
+    pub velocity_known: bool,
+    /// SNR per point [dB], when the frame carries side info (OOB TLV 7) or compressed points.
+    pub snr_db: Option<Vec<f32>>,
+    /// Noise per point [dB], when the frame carries side info.
+    pub noise_db: Option<Vec<f32>>,
+    /// Tracked targets (people-counting and toolbox frames).
+    pub targets: Vec<Target>,
+    /// TLV types in frame order.
+    pub tlv_types: Vec<u32>,
+    /// True when a points TLV was present but empty (the SDK 3.5 zero-point quirk).
+    pub empty_points_tlv: bool,
+    /// TLVs of a known type whose payload did not fit (left undecoded, passed through raw).
+    pub tlv_errors: Vec<TlvError>,
+}
+
+impl PointCloud {
+    /// Decodes `frame`. `velocity_resolution_mps` scales SDK 1/2 Doppler indices (from
+    /// [`crate::cfg::Derived::velocity_resolution_mps`]).
+    pub fn from_frame(frame: &Frame<'_>, velocity_resolution_mps: Option<f32>) -> PointCloud {
+        let dialect = Dialect::of(frame);
+        let mut c = PointCloud {
+            velocity_known: true,
+            ..PointCloud::default()
+        };
+        for raw in frame.tlvs() {
+            c.tlv_types.push(raw.ty);
+            match raw.decode(dialect) {
+                Ok(Tlv::Points(p)) => {
+                    c.empty_points_tlv |= p.is_empty();
+                    c.points.extend(p.iter());
+                }
+                Ok(Tlv::PointsQ(p)) => {
+                    c.empty_points_tlv |= p.is_empty();
+                    c.velocity_known = velocity_resolution_mps.is_some();
+                    let scale = velocity_resolution_mps.unwrap_or(f32::NAN);
+                    c.points.extend(p.iter().map(|q| Point {
+                        x: q.x,
+                        y: q.y,
+                        z: q.z,
+                        velocity: f32::from(q.doppler_idx) * scale,
+                    }));
+                }
+                Ok(Tlv::CompressedPoints(p)) => {
+                    c.empty_points_tlv |= p.is_empty();
+                    c.points.extend(p.iter().map(|s| s.to_cartesian()));
+                    c.snr_db = Some(p.iter().map(|s| s.snr).collect());
+                }
+                Ok(Tlv::SideInfo(s)) => {
+                    c.snr_db = Some(s.iter().map(|e| e.snr_db()).collect());
+                    c.noise_db = Some(s.iter().map(|e| e.noise_db()).collect());
+                }
+                Ok(Tlv::Targets(t)) => c.targets.extend(t.iter()),
+                Ok(_) => {}
+                Err(e) => c.tlv_errors.push(e),
+            }
+        }
+        c
+    }
+}
