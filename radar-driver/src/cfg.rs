@@ -510,14 +510,14 @@ impl RadarConfig {
         let two26 = f64::from(1u32 << 26);
 
         // The CLI's quantisation (truncation towards zero, as the C casts do).
-        let slope_lsb = scale * 1e3 * 900.0 / two26; // [kHz/us]
-        let slope_q = libm::trunc(p.freq_slope_mhz_us * 1e3 / slope_lsb);
+        let slope_lsb = scale * 1e3 * 900.0 / two26; // [MHz/us] (48.279 kHz/us at 77 GHz)
+        let slope_q = libm::trunc(p.freq_slope_mhz_us / slope_lsb);
         if !(1.0..=32767.0).contains(&slope_q) {
             return Err(invalid(
                 "frequency slope must be positive and fit the int16 register",
             ));
         }
-        let slope = slope_q * slope_lsb / 1e3; // [MHz/us]
+        let slope = slope_q * slope_lsb; // [MHz/us]
         let start = libm::trunc(p.start_freq_ghz * two26 / scale) * scale / two26; // [GHz]
         let q10ns = |us: f64| libm::trunc(us * 1000.0 / 10.0) * 10.0 / 1000.0;
         let (idle, adc_start, ramp_end) = (
@@ -644,7 +644,7 @@ mod tests {
         assert_eq!((d.chirps_per_frame, d.num_doppler_bins), (48, 16));
         // 100 MHz/us on a 77 GHz part: 100e3 / 48.279 = 2071.3 -> 2071 LSB.
         let lsb = 3.6e3 * 900.0 / f64::from(1u32 << 26);
-        assert!((d.slope_mhz_us - 2071.0 * lsb / 1e3).abs() < 1e-12);
+        assert!((d.slope_mhz_us - 2071.0 * lsb).abs() < 1e-12);
         let expect_rr = 3e8 * 7.2e6 / (2.0 * d.slope_mhz_us * 1e12 * 256.0);
         assert!((d.range_resolution_m - expect_rr).abs() < 1e-12);
         assert!(
@@ -653,7 +653,20 @@ mod tests {
             d.range_resolution_m
         );
         assert!((d.frame_period_ms - 100.0).abs() < 1e-9);
-        assert!(d.velocity_resolution_mps > 0.1 && d.velocity_resolution_mps < 0.2);
+        // fc = 77 GHz + S * 3 us + S * (256 / 7.2 Msps) / 2; Tc = 7 + 39 us; 3 TX, 16 Doppler bins.
+        let fc = 77.0 + d.slope_mhz_us * 3.0 / 1e3 + d.slope_mhz_us * 256.0 / 7.2 / 2.0 / 1e3;
+        assert!(
+            (d.center_freq_ghz - fc).abs() < 1e-6,
+            "{} vs {fc}",
+            d.center_freq_ghz
+        );
+        let vres = 3e8 / (2.0 * 16.0 * 3.0 * fc * 1e9 * 46e-6);
+        assert!((d.velocity_resolution_mps - vres).abs() < 1e-9);
+        assert!(
+            (d.velocity_resolution_mps - 0.859).abs() < 0.01,
+            "{}",
+            d.velocity_resolution_mps
+        );
         assert!((d.max_velocity_mps - d.velocity_resolution_mps * 8.0).abs() < 1e-12);
         // 921600 baud, 100 ms: 9216 B per frame.
         assert_eq!(d.uart_bytes_per_frame, 9216);
@@ -675,8 +688,11 @@ mod tests {
                 .unwrap()
                 .slope_mhz_us
         };
-        assert!((q(70.0, RfScale::Ghz77) - 69.956).abs() < 1e-3);
-        assert!((q(70.0, RfScale::Ghz60) - 69.992).abs() < 1e-3);
+        // 70 MHz/us is 1449.9 LSB at 77 GHz and 1933.2 LSB at 60 GHz; the CLI truncates.
+        let two26 = f64::from(1u32 << 26);
+        assert!((q(70.0, RfScale::Ghz77) - 1449.0 * 3.6e3 * 900.0 / two26).abs() < 1e-9);
+        assert!((q(70.0, RfScale::Ghz60) - 1933.0 * 2.7e3 * 900.0 / two26).abs() < 1e-9);
+        assert!((q(70.0, RfScale::Ghz77) - 69.957).abs() < 1e-3);
     }
 
     #[test]

@@ -219,7 +219,8 @@ pub struct FrameBuilder<'a> {
     pub subframe: u32,
     /// numDetectedObj; `None` = the point count of the points TLV.
     pub num_detected_obj: Option<u32>,
-    /// People-counting processing-time fields.
+    /// People-counting processing-time fields: chirp margin, frame processing, tracking, UART
+    /// sending (written in each header's own field order).
     pub lab_timing: [u32; 4],
     /// Byte used for the padding of out-of-box frames (SDK 2 sends 0x0F; SDK 3 garbage).
     pub pad_byte: u8,
@@ -344,7 +345,10 @@ impl<'a> FrameBuilder<'a> {
                 ] {
                     w.u32(v);
                 }
-                self.lab_timing.iter().for_each(|v| w.u32(*v));
+                let [chirp, frame, tracking, uart] = self.lab_timing;
+                [chirp, frame, uart, tracking]
+                    .iter()
+                    .for_each(|v| w.u32(*v));
                 w.u16(num_tlvs as u16);
                 w.u16(0);
             }

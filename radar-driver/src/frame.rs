@@ -31,9 +31,9 @@ pub enum Layout {
 /// Which header layout a framer expects.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum LayoutHint {
-    /// Detect per frame: a people-counting header is recognised by its checksum, anything else is
-    /// read as the out-of-box header (36 or 40 B by platform and SDK version). After two good
-    /// frames in a row of one layout the framer keeps to it.
+    /// Detect per frame: a people-counting header is recognised by its checksum (and a frame that
+    /// then does not hold together is read as out-of-box), anything else is read as the
+    /// out-of-box header (36 or 40 B by platform and SDK version).
     #[default]
     Auto,
     /// Always this layout.

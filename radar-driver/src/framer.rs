@@ -15,7 +15,7 @@
 
 use crate::error::{FrameError, FRAME_ERROR_KINDS};
 use crate::frame::{
-    detect, find_magic, find_magic_or_prefix, Detect, Frame, Layout, LayoutHint, MAGIC,
+    detect, find_magic, find_magic_or_prefix, read_u32, Detect, Frame, Layout, LayoutHint, MAGIC,
 };
 
 /// Default buffer size for host use [B]: larger than any frame that fits a 10 fps UART budget.
@@ -84,8 +84,7 @@ pub struct Framer<const N: usize> {
     /// Offset in the current candidate up to which the inner-magic scan has run.
     scanned: usize,
     hint: LayoutHint,
-    locked: Option<Layout>,
-    streak: (Option<Layout>, u8),
+    last_layout: Option<Layout>,
     max_len: usize,
     /// True when the last thing seen was a good frame (junk after it is a new loss of sync).
     in_sync: bool,
@@ -106,8 +105,7 @@ impl<const N: usize> Framer<N> {
             release: 0,
             scanned: 0,
             hint,
-            locked: None,
-            streak: (None, 0),
+            last_layout: None,
             max_len: N,
             in_sync: true,
             counters: Counters::default(),
@@ -131,11 +129,11 @@ impl<const N: usize> Framer<N> {
         self.buf.len() - self.release
     }
 
-    /// The layout the framer has settled on in auto mode (after two good frames in a row).
-    pub fn locked_layout(&self) -> Option<Layout> {
+    /// The layout of the last good frame (auto mode), or the fixed layout.
+    pub fn last_layout(&self) -> Option<Layout> {
         match self.hint {
             LayoutHint::Fixed(l) => Some(l),
-            LayoutHint::Auto => self.locked,
+            LayoutHint::Auto => self.last_layout,
         }
     }
 
@@ -268,7 +266,7 @@ impl<const N: usize> Framer<N> {
     }
 
     fn candidate_len(&self) -> Option<u32> {
-        let l = self.locked_layout().unwrap_or(Layout::Oob40);
+        let l = self.last_layout().unwrap_or(Layout::Oob40);
         l.claimed_len(&self.buf)
     }
 
@@ -289,10 +287,31 @@ impl<const N: usize> Framer<N> {
         if w.len() < MAGIC.len() {
             return Step::NeedMore(MAGIC.len());
         }
-        let hint = match self.locked_layout() {
-            Some(l) => LayoutHint::Fixed(l),
-            None => LayoutHint::Auto,
-        };
+        match self.hint {
+            LayoutHint::Fixed(l) => self.step_as(w, LayoutHint::Fixed(l)),
+            LayoutHint::Auto => {
+                // A people-counting header is recognised by its checksum; if the frame then does
+                // not hold together as one (a 1-in-65536 coincidence for an out-of-box header),
+                // it is read as the out-of-box frame it then is.
+                let scanned = self.scanned;
+                match self.step_as(w, LayoutHint::Auto) {
+                    Step::Drop(e, n)
+                        if !matches!(e, FrameError::Truncated { .. }) && w.len() >= 20 =>
+                    {
+                        self.scanned = scanned;
+                        let oob = LayoutHint::Fixed(oob_layout_of(w));
+                        match self.step_as(w, oob) {
+                            s @ Step::Frame(..) => s,
+                            _ => Step::Drop(e, n),
+                        }
+                    }
+                    s => s,
+                }
+            }
+        }
+    }
+
+    fn step_as(&mut self, w: &[u8], hint: LayoutHint) -> Step {
         let (layout, claimed) = match detect(w, hint) {
             Detect::NeedMore(n) => return self.need_more_or_truncated(w, n, None),
             Detect::Bad(e) => return Step::Drop(e, MAGIC.len()),
@@ -376,13 +395,8 @@ impl<const N: usize> Framer<N> {
     fn good(&mut self, layout: Layout, len: usize) {
         self.counters.frames_ok += 1;
         self.counters.bytes_ok += len as u64;
-        note_good(
-            &mut self.streak,
-            &mut self.locked,
-            &mut self.in_sync,
-            self.hint,
-            layout,
-        );
+        self.last_layout = Some(layout);
+        self.in_sync = true;
     }
 
     fn dropped<'r>(&mut self, error: FrameError, skipped: usize) -> Poll<'r> {
@@ -392,28 +406,13 @@ impl<const N: usize> Framer<N> {
             self.counters.resyncs += 1;
         }
         self.in_sync = false;
-        self.streak = (None, 0);
         Poll::Dropped { error, skipped }
     }
 }
 
-fn note_good(
-    streak: &mut (Option<Layout>, u8),
-    locked: &mut Option<Layout>,
-    in_sync: &mut bool,
-    hint: LayoutHint,
-    layout: Layout,
-) {
-    *in_sync = true;
-    if hint != LayoutHint::Auto || locked.is_some() {
-        return;
-    }
-    if streak.0 == Some(layout) {
-        streak.1 = streak.1.saturating_add(1);
-    } else {
-        *streak = (Some(layout), 1);
-    }
-    if streak.1 >= 2 {
-        *locked = Some(layout);
-    }
+/// The out-of-box layout a candidate header would have.
+fn oob_layout_of(w: &[u8]) -> Layout {
+    let v = read_u32(w, 8..12).unwrap_or(0);
+    let p = read_u32(w, 16..20).unwrap_or(0);
+    Layout::oob_for(v, p)
 }
