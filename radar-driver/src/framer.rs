@@ -81,11 +81,9 @@ pub struct Framer<const N: usize> {
     buf: heapless::Vec<u8, N>,
     /// Length of the frame handed out from `buf` by the last poll; removed at the next poll.
     release: usize,
-    /// Offset in the current candidate up to which the inner-magic scan has run.
-    scanned: usize,
-    hint: LayoutHint,
+    /// Window inspection state (scan offset, layout hint, length bound).
+    scan: Scanner,
     last_layout: Option<Layout>,
-    max_len: usize,
     /// True when the last thing seen was a good frame (junk after it is a new loss of sync).
     in_sync: bool,
     counters: Counters,
@@ -103,10 +101,12 @@ impl<const N: usize> Framer<N> {
         Framer {
             buf: heapless::Vec::new(),
             release: 0,
-            scanned: 0,
-            hint,
+            scan: Scanner {
+                scanned: 0,
+                hint,
+                max_len: N,
+            },
             last_layout: None,
-            max_len: N,
             in_sync: true,
             counters: Counters::default(),
         }
@@ -115,7 +115,7 @@ impl<const N: usize> Framer<N> {
     /// Lowers the largest accepted totalPacketLen below the buffer size [B] (for example to the
     /// bound a .cfg implies).
     pub fn with_max_len(mut self, max_len: usize) -> Self {
-        self.max_len = max_len.min(N);
+        self.scan.max_len = max_len.min(N);
         self
     }
 
@@ -131,7 +131,7 @@ impl<const N: usize> Framer<N> {
 
     /// The layout of the last good frame (auto mode), or the fixed layout.
     pub fn last_layout(&self) -> Option<Layout> {
-        match self.hint {
+        match self.scan.hint {
             LayoutHint::Fixed(l) => Some(l),
             LayoutHint::Auto => self.last_layout,
         }
@@ -164,7 +164,7 @@ impl<const N: usize> Framer<N> {
                 if window.is_empty() {
                     return Poll::NeedMore;
                 }
-                match self.step(window) {
+                match self.scan.step(window) {
                     Step::Skip(n) => {
                         *input = &window[n..];
                         self.consumed(n);
@@ -193,7 +193,7 @@ impl<const N: usize> Framer<N> {
                     }
                 }
             } else {
-                let step = self.step_buf();
+                let step = self.scan.step(&self.buf);
                 match step {
                     Step::Skip(n) => {
                         self.buf_drain(n);
@@ -222,7 +222,7 @@ impl<const N: usize> Framer<N> {
                             return self.dropped(
                                 FrameError::LengthTooLarge {
                                     len: need as u32,
-                                    max: self.max_len as u32,
+                                    max: self.scan.max_len as u32,
                                 },
                                 n,
                             );
@@ -258,7 +258,7 @@ impl<const N: usize> Framer<N> {
             FrameError::BufferTooShort { need: 16, have: n }
         };
         self.buf.clear();
-        self.scanned = 0;
+        self.scan.scanned = 0;
         if let Poll::Dropped { error, skipped } = self.dropped(error, n) {
             return Some((error, skipped));
         }
@@ -270,13 +270,57 @@ impl<const N: usize> Framer<N> {
         l.claimed_len(&self.buf)
     }
 
-    fn step_buf(&mut self) -> Step {
-        let buf = core::mem::take(&mut self.buf);
-        let s = self.step(&buf);
-        self.buf = buf;
-        s
+    fn buf_drain(&mut self, n: usize) {
+        let n = n.min(self.buf.len());
+        self.buf.copy_within(n.., 0);
+        self.buf.truncate(self.buf.len() - n);
+        self.scan.scanned = 0;
     }
 
+    fn consumed(&mut self, n: usize) {
+        self.counters.bytes_in += n as u64;
+    }
+
+    fn skip(&mut self, n: usize) {
+        if n == 0 {
+            return;
+        }
+        self.counters.bytes_skipped += n as u64;
+        if self.in_sync {
+            self.counters.resyncs += 1;
+            self.in_sync = false;
+        }
+    }
+
+    fn good(&mut self, layout: Layout, len: usize) {
+        self.counters.frames_ok += 1;
+        self.counters.bytes_ok += len as u64;
+        self.last_layout = Some(layout);
+        self.in_sync = true;
+    }
+
+    fn dropped<'r>(&mut self, error: FrameError, skipped: usize) -> Poll<'r> {
+        self.counters.frames_bad[error.kind_index()] += 1;
+        self.counters.bytes_skipped += skipped as u64;
+        if self.in_sync {
+            self.counters.resyncs += 1;
+        }
+        self.in_sync = false;
+        Poll::Dropped { error, skipped }
+    }
+}
+
+/// The part of the framer that looks at a window; kept apart from the buffer so the buffer can
+/// be looked at in place.
+#[derive(Debug)]
+struct Scanner {
+    /// Offset in the current candidate up to which the inner-magic scan has run.
+    scanned: usize,
+    hint: LayoutHint,
+    max_len: usize,
+}
+
+impl Scanner {
     /// Looks at a window that starts wherever the previous candidate ended.
     fn step(&mut self, w: &[u8]) -> Step {
         match find_magic_or_prefix(w) {
@@ -368,45 +412,6 @@ impl<const N: usize> Framer<N> {
         let found = w.get(from..).and_then(find_magic).map(|k| k + from);
         self.scanned = w.len();
         found
-    }
-
-    fn buf_drain(&mut self, n: usize) {
-        let n = n.min(self.buf.len());
-        self.buf.copy_within(n.., 0);
-        self.buf.truncate(self.buf.len() - n);
-        self.scanned = 0;
-    }
-
-    fn consumed(&mut self, n: usize) {
-        self.counters.bytes_in += n as u64;
-    }
-
-    fn skip(&mut self, n: usize) {
-        if n == 0 {
-            return;
-        }
-        self.counters.bytes_skipped += n as u64;
-        if self.in_sync {
-            self.counters.resyncs += 1;
-            self.in_sync = false;
-        }
-    }
-
-    fn good(&mut self, layout: Layout, len: usize) {
-        self.counters.frames_ok += 1;
-        self.counters.bytes_ok += len as u64;
-        self.last_layout = Some(layout);
-        self.in_sync = true;
-    }
-
-    fn dropped<'r>(&mut self, error: FrameError, skipped: usize) -> Poll<'r> {
-        self.counters.frames_bad[error.kind_index()] += 1;
-        self.counters.bytes_skipped += skipped as u64;
-        if self.in_sync {
-            self.counters.resyncs += 1;
-        }
-        self.in_sync = false;
-        Poll::Dropped { error, skipped }
     }
 }
 
