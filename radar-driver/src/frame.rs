@@ -556,26 +556,21 @@ impl<'a> Iterator for TlvIter<'a> {
 
 /// Position of the first full magic word in `hay`.
 pub fn find_magic(hay: &[u8]) -> Option<usize> {
-    let mut start = 0;
-    while let Some(p) = hay[start..].iter().position(|&b| b == MAGIC[0]) {
-        let i = start + p;
-        match hay.get(i..i + 8) {
-            Some(w) if w == MAGIC => return Some(i),
-            Some(_) => start = i + 1,
-            None => return None,
-        }
-    }
-    None
+    memchr::memmem::find(hay, &MAGIC)
 }
 
 /// Position of the first place where a magic word starts, either whole or as a prefix that runs
 /// into the end of `hay` (so it may complete with the next chunk).
 pub(crate) fn find_magic_or_prefix(hay: &[u8]) -> Option<usize> {
-    let mut start = 0;
-    while let Some(p) = hay[start..].iter().position(|&b| b == MAGIC[0]) {
+    if let Some(i) = find_magic(hay) {
+        return Some(i);
+    }
+    // No whole magic: only a prefix in the last 7 bytes can still become one.
+    let tail_start = hay.len().saturating_sub(MAGIC.len() - 1);
+    let mut start = tail_start;
+    while let Some(p) = memchr::memchr(MAGIC[0], &hay[start..]) {
         let i = start + p;
-        let n = (hay.len() - i).min(8);
-        if hay[i..i + n] == MAGIC[..n] {
+        if hay[i..] == MAGIC[..hay.len() - i] {
             return Some(i);
         }
         start = i + 1;
