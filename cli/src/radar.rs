@@ -329,9 +329,11 @@ impl Summary {
     }
 }
 
+/// An f32 as the shortest decimal that reads back to it (85.2, not 85.20000457763672); NaN and
+/// infinities (unknown values) as null.
 fn num(v: f32) -> Value {
     if v.is_finite() {
-        json!(v)
+        v.to_string().parse::<f64>().map_or(Value::Null, |d| json!(d))
     } else {
         Value::Null
     }
@@ -346,7 +348,7 @@ fn frame_json(
     let points: Vec<Value> = c
         .points
         .iter()
-        .map(|p| json!([p.x, p.y, p.z, num(p.velocity)]))
+        .map(|p| json!([num(p.x), num(p.y), num(p.z), num(p.velocity)]))
         .collect();
     let mut o = Map::new();
     o.insert("frame".into(), json!(h.frame_number));
@@ -374,7 +376,7 @@ fn frame_json(
         let t: Vec<Value> = c
             .targets
             .iter()
-            .map(|t| json!({"tid": t.tid, "position": t.position, "velocity": t.velocity}))
+            .map(|t| json!({"tid": t.tid, "position": t.position.map(num), "velocity": t.velocity.map(num)}))
             .collect();
         o.insert("targets".into(), Value::Array(t));
     }

@@ -13,7 +13,8 @@ pub struct PointCloud {
     /// False when the velocities could not be scaled (SDK 1/2 Doppler indices without a .cfg);
     /// the velocities are then NaN.
     pub velocity_known: bool,
-    /// SNR per point [dB], when the frame carries side info (OOB TLV 7) or compressed points.
+    /// SNR per point: [dB] from OOB side info (TLV 7); the lab's own unit (value x snr unit) for
+    /// compressed points.
     pub snr_db: Option<Vec<f32>>,
     /// Noise per point [dB], when the frame carries side info.
     pub noise_db: Option<Vec<f32>>,
