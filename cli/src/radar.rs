@@ -333,7 +333,9 @@ impl Summary {
 /// infinities (unknown values) as null.
 fn num(v: f32) -> Value {
     if v.is_finite() {
-        v.to_string().parse::<f64>().map_or(Value::Null, |d| json!(d))
+        v.to_string()
+            .parse::<f64>()
+            .map_or(Value::Null, |d| json!(d))
     } else {
         Value::Null
     }

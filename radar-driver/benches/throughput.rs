@@ -8,27 +8,10 @@
 use radar_driver::host::PointCloud;
 use radar_driver::{Framer, Poll, DEFAULT_MAX_FRAME};
 use std::hint::black_box;
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 const CHUNK: usize = 4096;
 const ROUNDS: usize = 7;
-
-fn captures() -> Option<PathBuf> {
-    let root = std::env::var_os("MILLIEGO_CAPTURES")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/captures"));
-    let dir = root.join("ti-mmwave");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        println!(
-            "skipped: captures not found at {} (set MILLIEGO_CAPTURES)",
-            dir.display()
-        );
-        None
-    }
-}
 
 /// Ours: frame in 4 KiB chunks, decode every TLV into an owned point cloud (as the peer does).
 fn ours(data: &[u8]) -> (usize, usize) {
@@ -84,7 +67,9 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 fn main() {
-    let Some(dir) = captures() else { return };
+    let Some(dir) = milliego_tests::captures_dir("ti-mmwave") else {
+        return;
+    };
     let min = Duration::from_millis(150);
     println!(
         "{:<52} {:>8} {:>8} {:>10} {:>10} {:>7}",

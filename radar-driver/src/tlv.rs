@@ -166,7 +166,7 @@ fn bad(ty: u32, p: &[u8], expected: Expected) -> TlvError {
 }
 
 fn multiple(ty: u32, p: &[u8], n: u32) -> Result<&[u8], TlvError> {
-    if p.len() % n as usize == 0 {
+    if p.len().is_multiple_of(n as usize) {
         Ok(p)
     } else {
         Err(bad(ty, p, Expected::MultipleOf(n)))
@@ -174,7 +174,7 @@ fn multiple(ty: u32, p: &[u8], n: u32) -> Result<&[u8], TlvError> {
 }
 
 fn pow2_u16s(ty: u32, p: &[u8]) -> Result<&[u8], TlvError> {
-    if p.len() % 2 == 0 && (p.len() / 2).is_power_of_two() {
+    if p.len().is_multiple_of(2) && (p.len() / 2).is_power_of_two() {
         Ok(p)
     } else {
         Err(bad(ty, p, Expected::PowerOfTwoU16s))
@@ -539,7 +539,7 @@ pub struct CompressedPoints<'a> {
 
 impl<'a> CompressedPoints<'a> {
     fn new(ty: u32, p: &'a [u8]) -> Result<Self, TlvError> {
-        if p.len() < 20 || (p.len() - 20) % 8 != 0 {
+        if p.len() < 20 || !(p.len() - 20).is_multiple_of(8) {
             return Err(bad(
                 ty,
                 p,

@@ -378,13 +378,10 @@ fn junk() -> impl Strategy<Value = Vec<u8>> {
     prop::collection::vec(any::<u8>().prop_map(|b| if b == 2 { 3 } else { b }), 0..40)
 }
 
-fn decode_stream(
-    wire: &[u8],
-    chunks: &[usize],
-) -> (
-    Vec<(Layout, u32, u32, Option<u32>, Vec<Spec>)>,
-    radar_driver::Counters,
-) {
+/// One decoded frame: layout, frame number, cycles, sub-frame, TLVs.
+type Decoded = (Layout, u32, u32, Option<u32>, Vec<Spec>);
+
+fn decode_stream(wire: &[u8], chunks: &[usize]) -> (Vec<Decoded>, radar_driver::Counters) {
     let mut framer: Box<Framer<65536>> = Box::default();
     let mut out = Vec::new();
     let mut rest = wire;

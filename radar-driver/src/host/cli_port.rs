@@ -150,7 +150,6 @@ impl<P: Read + Write> CliPort<P> {
                     ignored = Some(rest.trim().to_string());
                 } else if let Some(rest) = text.strip_prefix("Error") {
                     let code = rest
-                        .trim()
                         .split_whitespace()
                         .next()
                         .and_then(|c| c.parse().ok())
