@@ -7,7 +7,7 @@
 
 use core::fmt;
 
-/// Speed of light used by the SDK [m/s].
+/// Speed of light used by the SDK \[m/s\].
 pub const SPEED_OF_LIGHT: f64 = 3.0e8;
 
 /// One non-empty line of a .cfg file.
@@ -113,21 +113,21 @@ impl std::error::Error for CfgError {}
 pub struct ProfileCfg {
     /// Profile id.
     pub id: u8,
-    /// Start frequency [GHz].
+    /// Start frequency \[GHz\].
     pub start_freq_ghz: f64,
-    /// Idle time [us].
+    /// Idle time \[us\].
     pub idle_time_us: f64,
-    /// ADC start time [us].
+    /// ADC start time \[us\].
     pub adc_start_time_us: f64,
-    /// Ramp end time [us].
+    /// Ramp end time \[us\].
     pub ramp_end_time_us: f64,
-    /// Frequency slope [MHz/us].
+    /// Frequency slope \[MHz/us\].
     pub freq_slope_mhz_us: f64,
     /// ADC samples per chirp.
     pub num_adc_samples: u32,
-    /// ADC sample rate [ksps].
+    /// ADC sample rate \[ksps\].
     pub dig_out_sample_rate_ksps: f64,
-    /// RX gain [dB].
+    /// RX gain \[dB\].
     pub rx_gain_db: f64,
 }
 
@@ -155,7 +155,7 @@ pub struct FrameCfg {
     pub num_loops: u32,
     /// Frames to send (0 = forever).
     pub num_frames: u32,
-    /// Frame period [ms].
+    /// Frame period \[ms\].
     pub frame_periodicity_ms: f64,
 }
 
@@ -209,7 +209,7 @@ pub enum Command<'a> {
     GuiMonitor(GuiMonitor),
     /// `configDataPort baud ackPing`.
     DataPort {
-        /// Data UART baud rate [bit/s].
+        /// Data UART baud rate \[bit/s\].
         baud: u32,
     },
     /// Anything else: kept and uploaded as written.
@@ -371,7 +371,7 @@ pub struct RadarConfig {
     pub adc_output_fmt: Option<u8>,
     /// guiMonitor.
     pub gui: Option<GuiMonitor>,
-    /// Data port baud rate from configDataPort [bit/s].
+    /// Data port baud rate from configDataPort \[bit/s\].
     pub data_baud: Option<u32>,
     /// Commands kept but not modelled (tracking, monitoring, ...).
     pub other_commands: u32,
@@ -411,13 +411,13 @@ impl RfScale {
 pub struct Derived {
     /// RF scale used.
     pub rf_scale: f64,
-    /// Slope after the CLI's int16 quantisation [MHz/us].
+    /// Slope after the CLI's int16 quantisation \[MHz/us\].
     pub slope_mhz_us: f64,
-    /// Start frequency after quantisation [GHz].
+    /// Start frequency after quantisation \[GHz\].
     pub start_freq_ghz: f64,
-    /// Chirp centre frequency over the sampled part of the ramp [GHz].
+    /// Chirp centre frequency over the sampled part of the ramp \[GHz\].
     pub center_freq_ghz: f64,
-    /// Sampled bandwidth [MHz].
+    /// Sampled bandwidth \[MHz\].
     pub sampled_bandwidth_mhz: f64,
     /// Range FFT size.
     pub num_range_bins: u32,
@@ -429,24 +429,24 @@ pub struct Derived {
     pub num_tx: u32,
     /// RX antennas.
     pub num_rx: u32,
-    /// Range bin size [m].
+    /// Range bin size \[m\].
     pub range_resolution_m: f64,
-    /// Largest range the IF bandwidth allows [m] (c fs / 2S, halved for real ADC output).
+    /// Largest range the IF bandwidth allows \[m\] (c fs / 2S, halved for real ADC output).
     pub max_range_m: f64,
-    /// Doppler bin size [m/s].
+    /// Doppler bin size \[m/s\].
     pub velocity_resolution_mps: f64,
-    /// Largest unambiguous radial speed [m/s].
+    /// Largest unambiguous radial speed \[m/s\].
     pub max_velocity_mps: f64,
-    /// Frame period after quantisation to 5 ns [ms].
+    /// Frame period after quantisation to 5 ns \[ms\].
     pub frame_period_ms: f64,
-    /// Data UART rate [bit/s] (921600 unless configDataPort says otherwise).
+    /// Data UART rate \[bit/s\] (921600 unless configDataPort says otherwise).
     pub data_baud: u32,
-    /// Bytes per frame the data UART carries at that rate and frame period [B].
+    /// Bytes per frame the data UART carries at that rate and frame period \[B\].
     pub uart_bytes_per_frame: u32,
     /// Bytes per frame of everything except points (header, TLV headers, profiles, stats,
-    /// padding) [B].
+    /// padding) \[B\].
     pub fixed_bytes_per_frame: u32,
-    /// Bytes per point (16, plus 4 with side info) [B].
+    /// Bytes per point (16, plus 4 with side info) \[B\].
     pub bytes_per_point: u32,
     /// Points per frame the UART can carry before frames start to back up.
     pub max_points_per_frame: u32,

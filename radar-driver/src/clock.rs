@@ -7,7 +7,7 @@
 
 use crate::frame::Header;
 
-/// Rate of timeCpuCycles for a header [Hz]: 600 MHz for SDK 1/2 on xWR16xx, 200 MHz otherwise.
+/// Rate of timeCpuCycles for a header \[Hz\]: 600 MHz for SDK 1/2 on xWR16xx, 200 MHz otherwise.
 pub fn cpu_clock_hz(header: &Header) -> u32 {
     if header.version.major() < 3 && header.platform & 0xFFFF == 0x1642 {
         600_000_000
@@ -24,7 +24,7 @@ pub struct SensorTime {
     /// Unwrapped CPU cycle count since the first frame seen (None when the layout has no cycle
     /// counter).
     pub cycles: Option<u64>,
-    /// Seconds since the first frame seen, from the unwrapped cycles [s].
+    /// Seconds since the first frame seen, from the unwrapped cycles \[s\].
     pub seconds: Option<f64>,
 }
 
@@ -53,7 +53,7 @@ impl CycleUnwrapper {
         }
     }
 
-    /// Counter rate [Hz].
+    /// Counter rate \[Hz\].
     pub fn rate_hz(&self) -> u32 {
         self.rate_hz
     }

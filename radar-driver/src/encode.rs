@@ -11,9 +11,9 @@ pub const MAX_TLVS: usize = 16;
 /// The output buffer is too small.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BufferTooSmall {
-    /// Bytes the frame needs [B].
+    /// Bytes the frame needs \[B\].
     pub need: usize,
-    /// Bytes the buffer has [B].
+    /// Bytes the buffer has \[B\].
     pub have: usize,
 }
 
@@ -59,7 +59,7 @@ pub struct CompressedRaw {
 pub enum TlvOut<'a> {
     /// Any type with a raw payload.
     Raw(u32, &'a [u8]),
-    /// Type 1, SDK 3: [x, y, z, velocity].
+    /// Type 1, SDK 3: \[x, y, z, velocity\].
     Points(&'a [[f32; 4]]),
     /// Type 1, SDK 1/2: Q format and points.
     PointsQ(u16, &'a [QPointRaw]),
@@ -69,7 +69,7 @@ pub enum TlvOut<'a> {
     U16s(u32, &'a [u16]),
     /// Type 6 stats: six u32.
     Stats([u32; 6]),
-    /// Type 9 temperature: valid flag, time [ms], 10 sensors [deg C].
+    /// Type 9 temperature: valid flag, time \[ms\], 10 sensors \[deg C\].
     Temperature(i32, u32, [i16; 10]),
     /// Compressed points of the given type (6 in the people-counting labs, 1020 in the toolbox).
     Compressed(u32, CompressedUnits, &'a [CompressedRaw]),
@@ -263,7 +263,7 @@ impl<'a> FrameBuilder<'a> {
         self
     }
 
-    /// Adds SDK 3 points ([x, y, z, velocity] in m and m/s).
+    /// Adds SDK 3 points (\[x, y, z, velocity\] in m and m/s).
     pub fn points(self, p: &'a [[f32; 4]]) -> Self {
         self.tlv(TlvOut::Points(p))
     }
@@ -274,7 +274,7 @@ impl<'a> FrameBuilder<'a> {
         self
     }
 
-    /// Total length this frame will have [B].
+    /// Total length this frame will have \[B\].
     pub fn len(&self) -> usize {
         let body: usize = self.tlvs.iter().map(|t| 8 + t.payload_len()).sum();
         let mut n = self.layout.header_len() + body;

@@ -10,25 +10,25 @@ use core::fmt;
 pub enum FrameError {
     /// The buffer handed to [`crate::Frame::new_checked`] is shorter than the header or the claimed length.
     BufferTooShort {
-        /// Bytes needed [B].
+        /// Bytes needed \[B\].
         need: usize,
-        /// Bytes available [B].
+        /// Bytes available \[B\].
         have: usize,
     },
     /// The buffer does not start with the 8-byte magic word.
     BadMagic,
     /// totalPacketLen is smaller than the header of this layout.
     LengthTooSmall {
-        /// Claimed total length [B].
+        /// Claimed total length \[B\].
         len: u32,
-        /// Header length of the layout [B].
+        /// Header length of the layout \[B\].
         min: u32,
     },
     /// totalPacketLen exceeds the framer's bound (its buffer, or the configured maximum).
     LengthTooLarge {
-        /// Claimed total length [B].
+        /// Claimed total length \[B\].
         len: u32,
-        /// The bound [B].
+        /// The bound \[B\].
         max: u32,
     },
     /// The people-counting header checksum does not fold to 0xFFFF.
@@ -40,9 +40,9 @@ pub enum FrameError {
     TlvHeaderOverrun {
         /// TLV index within the frame (0-based).
         index: u32,
-        /// Offset of the TLV header from the frame start [B].
+        /// Offset of the TLV header from the frame start \[B\].
         offset: u32,
-        /// Bytes left in the frame at that offset [B].
+        /// Bytes left in the frame at that offset \[B\].
         room: u32,
     },
     /// A TLV's length does not fit in what remains of the frame (or, where the length includes the
@@ -52,22 +52,22 @@ pub enum FrameError {
         index: u32,
         /// TLV type.
         ty: u32,
-        /// Length field as sent [B].
+        /// Length field as sent \[B\].
         len: u32,
-        /// Bytes left in the frame after the TLV header [B].
+        /// Bytes left in the frame after the TLV header \[B\].
         room: u32,
     },
     /// A layout without padding (people counting) has bytes after its last TLV.
     TrailingBytes {
-        /// Bytes after the last TLV [B].
+        /// Bytes after the last TLV \[B\].
         len: u32,
     },
     /// The next frame's magic word appeared inside this frame's claimed length: the frame was cut
     /// short on the wire (or by the tool that saved it).
     Truncated {
-        /// Claimed total length [B].
+        /// Claimed total length \[B\].
         claimed: u32,
-        /// Bytes present before the next magic (or the end of the stream) [B].
+        /// Bytes present before the next magic (or the end of the stream) \[B\].
         got: u32,
     },
 }
@@ -154,9 +154,9 @@ pub enum Expected {
     MultipleOf(u32),
     /// A fixed prefix, then a multiple of the element size.
     PrefixThenMultipleOf {
-        /// Prefix length [B].
+        /// Prefix length \[B\].
         prefix: u32,
-        /// Element size [B].
+        /// Element size \[B\].
         elem: u32,
     },
     /// A power-of-two count of u16 bins (range/noise profiles, range-Doppler heatmap).
@@ -165,7 +165,7 @@ pub enum Expected {
     FromCount {
         /// Declared element count.
         count: u32,
-        /// Payload length implied by that count [B].
+        /// Payload length implied by that count \[B\].
         implied: u32,
     },
 }
@@ -177,7 +177,7 @@ pub enum TlvError {
     BadLength {
         /// TLV type.
         ty: u32,
-        /// Payload length [B].
+        /// Payload length \[B\].
         len: u32,
         /// What the type requires.
         expected: Expected,

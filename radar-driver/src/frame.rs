@@ -9,7 +9,7 @@ use crate::error::FrameError;
 /// The 8-byte sync word that starts every frame (u16 words 0x0102, 0x0304, 0x0506, 0x0708, LE).
 pub const MAGIC: [u8; 8] = [0x02, 0x01, 0x04, 0x03, 0x06, 0x05, 0x08, 0x07];
 
-/// Size of a TLV header (u32 type, u32 length) [B].
+/// Size of a TLV header (u32 type, u32 length) \[B\].
 pub const TLV_HEADER_LEN: usize = 8;
 
 /// Header layouts found on the data UART of TI's demos and labs.
@@ -75,7 +75,7 @@ mod field {
 }
 
 impl Layout {
-    /// Header length of this layout, magic included [B].
+    /// Header length of this layout, magic included \[B\].
     pub const fn header_len(self) -> usize {
         match self {
             Layout::Oob36 => 36,
@@ -123,7 +123,7 @@ impl Layout {
         }
     }
 
-    /// The claimed total length of a frame starting at `buf[0]` in this layout, once the field is in.
+    /// The claimed total length of a frame starting at `buf\[0\]` in this layout, once the field is in.
     pub fn claimed_len(self, buf: &[u8]) -> Option<u32> {
         read_u32(buf, self.total_len_field())
     }
@@ -220,7 +220,7 @@ pub struct Header {
     pub layout: Layout,
     /// SDK / lab version.
     pub version: Version,
-    /// Whole packet length, header and padding included [B].
+    /// Whole packet length, header and padding included \[B\].
     pub total_len: u32,
     /// Platform: 0xA1843, 0xA6843, 0xA1642, 0xA1443 (0xA in the top nibble, part number below).
     pub platform: u32,
@@ -444,12 +444,12 @@ impl<'a> Frame<'a> {
         self.header.layout
     }
 
-    /// The whole frame as sent (header, TLVs, padding) [B].
+    /// The whole frame as sent (header, TLVs, padding) \[B\].
     pub fn as_bytes(&self) -> &'a [u8] {
         self.bytes
     }
 
-    /// Padding after the last TLV [B] (content undefined, never validated).
+    /// Padding after the last TLV \[B\] (content undefined, never validated).
     pub fn padding_len(&self) -> usize {
         let end = walk_tlvs(self.bytes, self.header.layout, self.header.num_tlvs)
             .unwrap_or(self.bytes.len());

@@ -18,7 +18,7 @@ use crate::frame::{
     detect, find_magic, find_magic_or_prefix, read_u32, Detect, Frame, Layout, LayoutHint, MAGIC,
 };
 
-/// Default buffer size for host use [B]: larger than any frame that fits a 10 fps UART budget.
+/// Default buffer size for host use \[B\]: larger than any frame that fits a 10 fps UART budget.
 pub const DEFAULT_MAX_FRAME: usize = 64 * 1024;
 
 /// What one [`Framer::poll`] call produced.
@@ -30,7 +30,7 @@ pub enum Poll<'a> {
     Dropped {
         /// Why.
         error: FrameError,
-        /// Bytes dropped for it (the magic, or the truncated frame's bytes) [B].
+        /// Bytes dropped for it (the magic, or the truncated frame's bytes) \[B\].
         skipped: usize,
     },
     /// The input is used up: feed more bytes.
@@ -40,16 +40,16 @@ pub enum Poll<'a> {
 /// Counters since the framer was created. Nothing is dropped without being counted here.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Counters {
-    /// Bytes consumed from the input [B].
+    /// Bytes consumed from the input \[B\].
     pub bytes_in: u64,
     /// Frames released.
     pub frames_ok: u64,
-    /// Bytes in released frames [B].
+    /// Bytes in released frames \[B\].
     pub bytes_ok: u64,
     /// Rejected candidates, indexed by [`FrameError::kind_index`].
     pub frames_bad: [u64; FRAME_ERROR_KINDS],
     /// Bytes not part of any released frame: junk between frames, dropped magics, truncated
-    /// frames [B].
+    /// frames \[B\].
     pub bytes_skipped: u64,
     /// Times the framer had to search for a magic word where a frame should have started
     /// (junk before a frame, or after a rejected candidate).
@@ -112,7 +112,7 @@ impl<const N: usize> Framer<N> {
         }
     }
 
-    /// Lowers the largest accepted totalPacketLen below the buffer size [B] (for example to the
+    /// Lowers the largest accepted totalPacketLen below the buffer size \[B\] (for example to the
     /// bound a .cfg implies).
     pub fn with_max_len(mut self, max_len: usize) -> Self {
         self.scan.max_len = max_len.min(N);
@@ -124,7 +124,7 @@ impl<const N: usize> Framer<N> {
         &self.counters
     }
 
-    /// Bytes held for an incomplete candidate [B].
+    /// Bytes held for an incomplete candidate \[B\].
     pub fn buffered(&self) -> usize {
         self.buf.len() - self.release
     }

@@ -8,7 +8,7 @@
 //! * [`Frame`] is a zero-copy checked view (out-of-box demo 36/40-byte headers, people-counting
 //!   48/52-byte headers); after [`Frame::new_checked`] no accessor panics.
 //! * [`tlv`] decodes TLV payloads into typed views; unknown types pass through raw.
-//! * [`cfg`] parses `.cfg` files and derives range/velocity resolution, frame period and the
+//! * [`cfg`](mod@cfg) parses `.cfg` files and derives range/velocity resolution, frame period and the
 //!   points-per-frame bound; [`clock`] unwraps the sensor clock.
 //! * [`encode`] writes frames of every layout (tests, fuzz seeds, the simulator).
 //! * With the `std` feature, [`host`] adds a timestamping reader and the CLI-port controller.

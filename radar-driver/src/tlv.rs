@@ -211,17 +211,17 @@ fn i16_at(p: &[u8], i: usize) -> i16 {
 /// A detected point in Cartesian sensor coordinates: x right, y boresight, z up.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Point {
-    /// x [m].
+    /// x \[m\].
     pub x: f32,
-    /// y [m] (boresight).
+    /// y \[m\] (boresight).
     pub y: f32,
-    /// z [m].
+    /// z \[m\].
     pub z: f32,
-    /// Radial (Doppler) velocity [m/s]; negative when approaching.
+    /// Radial (Doppler) velocity \[m/s\]; negative when approaching.
     pub velocity: f32,
 }
 
-/// SDK 3 points: N x {f32 x, y, z [m], f32 velocity [m/s]}.
+/// SDK 3 points: N x {f32 x, y, z \[m\], f32 velocity \[m/s\]}.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Points<'a>(&'a [u8]);
 
@@ -261,11 +261,11 @@ pub struct QPoint {
     pub doppler_idx: i16,
     /// Peak value (linear magnitude, unitless).
     pub peak: u16,
-    /// x [m].
+    /// x \[m\].
     pub x: f32,
-    /// y [m].
+    /// y \[m\].
     pub y: f32,
-    /// z [m].
+    /// z \[m\].
     pub z: f32,
 }
 
@@ -383,17 +383,17 @@ impl<'a> Complex16s<'a> {
 /// Processing statistics (OOB type 6).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Stats {
-    /// Inter-frame processing time [us].
+    /// Inter-frame processing time \[us\].
     pub inter_frame_processing_time_us: u32,
-    /// Transmit output time [us].
+    /// Transmit output time \[us\].
     pub transmit_output_time_us: u32,
-    /// Inter-frame processing margin [us].
+    /// Inter-frame processing margin \[us\].
     pub inter_frame_processing_margin_us: u32,
-    /// Inter-chirp processing margin [us].
+    /// Inter-chirp processing margin \[us\].
     pub inter_chirp_processing_margin_us: u32,
-    /// Active frame CPU load [%].
+    /// Active frame CPU load \[%\].
     pub active_frame_cpu_load_pct: u32,
-    /// Inter-frame CPU load [%].
+    /// Inter-frame CPU load \[%\].
     pub inter_frame_cpu_load_pct: u32,
 }
 
@@ -414,18 +414,18 @@ impl Stats {
 /// Side info of one point.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct SideInfoEntry {
-    /// SNR [0.1 dB].
+    /// SNR \[0.1 dB\].
     pub snr_raw: i16,
-    /// Noise [0.1 dB].
+    /// Noise \[0.1 dB\].
     pub noise_raw: i16,
 }
 
 impl SideInfoEntry {
-    /// SNR [dB].
+    /// SNR \[dB\].
     pub fn snr_db(&self) -> f32 {
         f32::from(self.snr_raw) * 0.1
     }
-    /// Noise [dB].
+    /// Noise \[dB\].
     pub fn noise_db(&self) -> f32 {
         f32::from(self.noise_raw) * 0.1
     }
@@ -464,9 +464,9 @@ impl<'a> SideInfo<'a> {
 pub struct Temperature {
     /// Non-zero when the report is valid (tempReportValid == 0 means valid in the SDK; kept raw).
     pub report_valid: i32,
-    /// Time of the report [ms].
+    /// Time of the report \[ms\].
     pub time_ms: u32,
-    /// Rx0-3, Tx0-2, PM, Dig0, Dig1 [deg C].
+    /// Rx0-3, Tx0-2, PM, Dig0, Dig1 \[deg C\].
     pub sensors_c: [i16; 10],
 }
 
@@ -488,13 +488,13 @@ impl Temperature {
 /// Units of the compressed point cloud: raw value x unit = physical value.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct CompressedUnits {
-    /// Elevation unit [rad].
+    /// Elevation unit \[rad\].
     pub elevation: f32,
-    /// Azimuth unit [rad].
+    /// Azimuth unit \[rad\].
     pub azimuth: f32,
-    /// Doppler unit [m/s].
+    /// Doppler unit \[m/s\].
     pub doppler: f32,
-    /// Range unit [m].
+    /// Range unit \[m\].
     pub range: f32,
     /// SNR unit (linear ratio as the lab reports it).
     pub snr: f32,
@@ -503,13 +503,13 @@ pub struct CompressedUnits {
 /// A point of the compressed cloud, in spherical coordinates.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SphericalPoint {
-    /// Range [m].
+    /// Range \[m\].
     pub range: f32,
-    /// Azimuth [rad], positive to the right of boresight.
+    /// Azimuth \[rad\], positive to the right of boresight.
     pub azimuth: f32,
-    /// Elevation [rad], positive up.
+    /// Elevation \[rad\], positive up.
     pub elevation: f32,
-    /// Radial velocity [m/s].
+    /// Radial velocity \[m/s\].
     pub doppler: f32,
     /// SNR (the lab's linear unit).
     pub snr: f32,
@@ -597,11 +597,11 @@ impl<'a> CompressedPoints<'a> {
 pub struct Target {
     /// Track id.
     pub tid: u32,
-    /// Position x, y, z [m].
+    /// Position x, y, z \[m\].
     pub position: [f32; 3],
-    /// Velocity x, y, z [m/s].
+    /// Velocity x, y, z \[m/s\].
     pub velocity: [f32; 3],
-    /// Acceleration x, y, z [m/s^2].
+    /// Acceleration x, y, z \[m/s^2\].
     pub acceleration: [f32; 3],
     /// Error covariance, 4x4 row-major.
     pub error_covariance: [f32; 16],
@@ -612,7 +612,7 @@ pub struct Target {
 }
 
 impl Target {
-    /// Size of one target record [B].
+    /// Size of one target record \[B\].
     pub const SIZE: usize = 112;
 }
 
@@ -659,9 +659,9 @@ impl<'a> Targets<'a> {
 pub struct TargetHeight {
     /// Track id.
     pub tid: u32,
-    /// Highest point [m].
+    /// Highest point \[m\].
     pub max_z: f32,
-    /// Lowest point [m].
+    /// Lowest point \[m\].
     pub min_z: f32,
 }
 

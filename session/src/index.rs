@@ -1,7 +1,7 @@
 //! The timing index: when each read chunk of a stream arrived.
 //!
 //! Layout (little-endian): 16-byte header `MEGOIDX1` + u64 flags (0), then one 16-byte record per
-//! chunk: u64 host time [ns since session start], u64 end offset (bytes of the data file up to and
+//! chunk: u64 host time \[ns since session start\], u64 end offset (bytes of the data file up to and
 //! including this chunk). Host times never decrease; end offsets strictly increase.
 
 use crate::{err, io_err, ErrorKind, SessionError};
@@ -15,9 +15,9 @@ pub const INDEX_MAGIC: [u8; 8] = *b"MEGOIDX1";
 /// One read chunk.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct IndexEntry {
-    /// Host monotonic time when the read returned [ns since session start].
+    /// Host monotonic time when the read returned \[ns since session start\].
     pub host_ns: u64,
-    /// Bytes of the data file up to and including this chunk [B].
+    /// Bytes of the data file up to and including this chunk \[B\].
     pub end: u64,
 }
 

@@ -133,14 +133,14 @@ pub struct Stream {
     pub data: PathBuf,
     /// Host time per read chunk, if the session was recorded with an index.
     pub index: Option<Vec<IndexEntry>>,
-    /// Length of the data file [B].
+    /// Length of the data file \[B\].
     pub len: u64,
 }
 
 /// A chunk of a stream as it was read, with its host time when the session has an index.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Chunk {
-    /// Host monotonic time when the read returned [ns since session start]; `None` without index.
+    /// Host monotonic time when the read returned \[ns since session start\]; `None` without index.
     pub host_ns: Option<u64>,
     /// Byte range in the data file.
     pub start: u64,
@@ -498,7 +498,7 @@ impl StreamWriter {
         })
     }
 
-    /// Bytes written so far [B].
+    /// Bytes written so far \[B\].
     pub fn written(&self) -> u64 {
         self.written
     }

@@ -34,7 +34,7 @@ pub struct RadarMeta {
     /// The .cfg the radar ran.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cfg: Option<String>,
-    /// Data port baud rate [bit/s].
+    /// Data port baud rate \[bit/s\].
     #[serde(default = "default_radar_baud")]
     pub baud: u32,
     /// Device (free text, e.g. "IWR6843ISK").
@@ -71,7 +71,7 @@ pub struct ImuMeta {
     /// Timing index file.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub index: Option<String>,
-    /// Port baud rate [bit/s].
+    /// Port baud rate \[bit/s\].
     #[serde(default = "default_imu_baud")]
     pub baud: u32,
     /// Device (free text, e.g. "MTi-3").
@@ -80,7 +80,7 @@ pub struct ImuMeta {
     /// SampleTimeFine wrap: "u32" (MTi-1/600 series, 2^32 ticks) or "day" (10/100 series).
     #[serde(default = "default_wrap")]
     pub sample_time_wrap: String,
-    /// Configured inertial output rate [Hz].
+    /// Configured inertial output rate \[Hz\].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rate_hz: Option<f64>,
     /// Port it was recorded from (informational).
@@ -113,7 +113,7 @@ impl Default for ImuMeta {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Extrinsic {
-    /// Translation t [m].
+    /// Translation t \[m\].
     pub translation_m: [f64; 3],
     /// Rotation R as a unit quaternion (w, x, y, z).
     pub rotation_wxyz: [f64; 4],
@@ -144,7 +144,7 @@ pub struct Extrinsics {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct GroundTruthMeta {
-    /// TUM file: body pose in the world frame, time on the session host clock [s].
+    /// TUM file: body pose in the world frame, time on the session host clock \[s\].
     pub file: String,
 }
 
@@ -153,13 +153,13 @@ pub struct GroundTruthMeta {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct ClockTruth {
-    /// Radar clock offset [s].
+    /// Radar clock offset \[s\].
     pub radar_offset_s: f64,
-    /// Radar clock drift [ppm].
+    /// Radar clock drift \[ppm\].
     pub radar_drift_ppm: f64,
-    /// IMU clock offset [s].
+    /// IMU clock offset \[s\].
     pub imu_offset_s: f64,
-    /// IMU clock drift [ppm].
+    /// IMU clock drift \[ppm\].
     pub imu_drift_ppm: f64,
 }
 

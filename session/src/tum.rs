@@ -1,4 +1,4 @@
-//! TUM trajectories: one pose per line, `t tx ty tz qx qy qz qw` (t [s], position [m], unit
+//! TUM trajectories: one pose per line, `t tx ty tz qx qy qz qw` (t \[s\], position \[m\], unit
 //! quaternion with the scalar last); `#` comments.
 
 use crate::{err, io_err, ErrorKind, SessionError};
@@ -8,9 +8,9 @@ use std::path::Path;
 /// One pose of a trajectory.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TumPose {
-    /// Time [s] (session host clock for ground truth).
+    /// Time \[s\] (session host clock for ground truth).
     pub t: f64,
-    /// Position [m].
+    /// Position \[m\].
     pub p: [f64; 3],
     /// Orientation as a unit quaternion (x, y, z, w).
     pub q: [f64; 4],

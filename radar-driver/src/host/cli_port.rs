@@ -8,7 +8,7 @@ use std::fmt;
 use std::io::{self, Read, Write};
 use std::time::{Duration, Instant};
 
-/// CLI port baud rate [bit/s].
+/// CLI port baud rate \[bit/s\].
 pub const CLI_BAUD: u32 = 115_200;
 
 /// How the device answered one line.

@@ -8,15 +8,15 @@ use crate::tlv::{Dialect, Point, Target, Tlv};
 /// The decoded content of one frame that egomotion and the dump care about.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct PointCloud {
-    /// Points (x right, y boresight, z up [m]; radial velocity [m/s]).
+    /// Points (x right, y boresight, z up \[m\]; radial velocity \[m/s\]).
     pub points: Vec<Point>,
     /// False when the velocities could not be scaled (SDK 1/2 Doppler indices without a .cfg);
     /// the velocities are then NaN.
     pub velocity_known: bool,
-    /// SNR per point: [dB] from OOB side info (TLV 7); the lab's own unit (value x snr unit) for
+    /// SNR per point: \[dB\] from OOB side info (TLV 7); the lab's own unit (value x snr unit) for
     /// compressed points.
     pub snr_db: Option<Vec<f32>>,
-    /// Noise per point [dB], when the frame carries side info.
+    /// Noise per point \[dB\], when the frame carries side info.
     pub noise_db: Option<Vec<f32>>,
     /// Tracked targets (people-counting and toolbox frames).
     pub targets: Vec<Target>,

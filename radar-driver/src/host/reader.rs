@@ -41,7 +41,7 @@ pub enum ReadEvent {
     Dropped {
         /// Why.
         error: FrameError,
-        /// Bytes dropped [B].
+        /// Bytes dropped \[B\].
         skipped: usize,
         /// When the read that revealed it returned.
         host_time: Instant,
