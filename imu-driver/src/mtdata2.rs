@@ -945,8 +945,11 @@ pub struct Sample {
     pub temperature: Option<f64>,
     /// Status word (a status byte is widened).
     pub status: Option<u32>,
-    /// True when the message carries GNSS data (its time runs behind the inertial messages).
-    pub has_gnss: bool,
+    /// True when the message carries a GNSS PVT record (its time runs behind the inertial
+    /// messages).
+    pub has_gnss_pvt: bool,
+    /// True when the message carries GNSS satellite info (sent separately, with the PVT's time).
+    pub has_gnss_sat_info: bool,
     /// True when it carries high-rate (HR) outputs.
     pub has_high_rate: bool,
     /// Items that failed to decode.
@@ -969,7 +972,8 @@ impl Sample {
             Value::Temperature(t) => self.temperature = Some(t),
             Value::StatusWord(s) => self.status = Some(s),
             Value::StatusByte(s) => self.status = Some(u32::from(s)),
-            Value::GnssPvtData(_) | Value::GnssSatInfo(_) => self.has_gnss = true,
+            Value::GnssPvtData(_) => self.has_gnss_pvt = true,
+            Value::GnssSatInfo(_) => self.has_gnss_sat_info = true,
             Value::AccelerationHr(a) => {
                 self.has_high_rate = true;
                 self.acceleration.get_or_insert(a);

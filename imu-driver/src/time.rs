@@ -248,8 +248,11 @@ impl Default for Limits {
 pub enum MessageKind {
     /// Regular inertial/orientation messages.
     Inertial,
-    /// Messages with GNSS data (their time is 40-60 ms earlier than the preceding inertial one).
-    Gnss,
+    /// Messages with a GNSS PVT record (their time is 40-60 ms earlier than the preceding
+    /// inertial one).
+    GnssPvt,
+    /// Messages with GNSS satellite info (they share the PVT message's time).
+    GnssSatInfo,
     /// Messages with high-rate (HR) outputs, sent separately at ~1 kHz.
     HighRate,
 }
@@ -257,8 +260,10 @@ pub enum MessageKind {
 impl MessageKind {
     /// The kind of a message by its content.
     pub fn of(sample: &Sample) -> Self {
-        if sample.has_gnss {
-            Self::Gnss
+        if sample.has_gnss_pvt {
+            Self::GnssPvt
+        } else if sample.has_gnss_sat_info {
+            Self::GnssSatInfo
         } else if sample.has_high_rate {
             Self::HighRate
         } else {
@@ -269,8 +274,9 @@ impl MessageKind {
     const fn index(self) -> usize {
         match self {
             Self::Inertial => 0,
-            Self::Gnss => 1,
-            Self::HighRate => 2,
+            Self::GnssPvt => 1,
+            Self::GnssSatInfo => 2,
+            Self::HighRate => 3,
         }
     }
 }
@@ -295,7 +301,7 @@ pub struct Checker {
     limits: Limits,
     unwrapper: SampleTimeUnwrapper,
     counters: CounterTracker,
-    last_time: [Option<u64>; 3],
+    last_time: [Option<u64>; 4],
     /// Messages with at least one flag.
     pub flagged: u64,
 }
@@ -312,7 +318,7 @@ impl Checker {
             limits,
             unwrapper: SampleTimeUnwrapper::new(wrap),
             counters: CounterTracker::new(),
-            last_time: [None; 3],
+            last_time: [None; 4],
             flagged: 0,
         }
     }
