@@ -461,7 +461,7 @@ mod tests {
         let mut ch = Checker::new(TimeWrap::Pow32);
         assert!(ch.check(&sample(1, 1000)).flags.is_clean());
         let gnss = Sample {
-            has_gnss: true,
+            has_gnss_pvt: true,
             ..sample(2, 500)
         };
         assert!(
