@@ -19,6 +19,20 @@ pub enum Poll<'a> {
     NeedMore,
 }
 
+/// [`Poll`] without the borrow: where the frame lies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Step {
+    /// The frame is the last `len` bytes consumed from the input.
+    Input(usize),
+    /// The frame is the first `len` bytes of the framer's buffer.
+    Buffer(usize),
+    Dropped {
+        bytes: usize,
+        error: FrameError,
+    },
+    NeedMore,
+}
+
 /// Rejected candidate frames, by reason.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct BadFrames {
@@ -138,6 +152,27 @@ impl<const CAP: usize> Framer<CAP> {
     /// returned frame borrows either `input` or the framer's buffer; the input slice itself is
     /// only borrowed for the call, so `while` loops over one chunk work as expected.
     pub fn poll<'a, 'b: 'a>(&'a mut self, input: &mut &'b [u8]) -> Poll<'a> {
+        let before: &'b [u8] = input;
+        match self.step(input) {
+            Step::Input(len) => {
+                let end = before.len() - input.len();
+                Poll::Frame(XbusFrame::from_scanned(
+                    before.get(end - len..end).unwrap_or_default(),
+                ))
+            }
+            Step::Buffer(len) => Poll::Frame(self.buffered_frame(len)),
+            Step::Dropped { bytes, error } => Poll::Dropped { bytes, error },
+            Step::NeedMore => Poll::NeedMore,
+        }
+    }
+
+    /// The frame [`Step::Buffer`] announced.
+    pub(crate) fn buffered_frame(&self, len: usize) -> XbusFrame<'_> {
+        XbusFrame::from_scanned(self.buf.get(..len).unwrap_or_default())
+    }
+
+    /// One step of [`poll`](Self::poll), reporting where a frame lies instead of borrowing it.
+    pub(crate) fn step(&mut self, input: &mut &[u8]) -> Step {
         if self.released > 0 {
             self.drain_front(self.released);
             self.released = 0;
@@ -145,7 +180,7 @@ impl<const CAP: usize> Framer<CAP> {
         let max = self.max_payload();
         loop {
             if self.buf.is_empty() {
-                return self.poll_input(input, max);
+                return self.step_input(input, max);
             }
             if self.buf.first() != Some(&PREAMBLE) {
                 // Left behind by a frame found inside a rejected candidate.
@@ -157,7 +192,7 @@ impl<const CAP: usize> Framer<CAP> {
                 self.drain_front(bytes);
                 self.counters.bytes_skipped += bytes as u64;
                 self.counters.resyncs += 1;
-                return Poll::Dropped {
+                return Step::Dropped {
                     bytes,
                     error: FrameError::NoPreamble,
                 };
@@ -168,7 +203,7 @@ impl<const CAP: usize> Framer<CAP> {
                 Scan::Invalid(error) => return self.reject_buffered(error),
             };
             if input.is_empty() {
-                return Poll::NeedMore;
+                return Step::NeedMore;
             }
             let take = need.saturating_sub(self.buf.len()).min(input.len());
             let (head, tail) = input.split_at(take);
@@ -210,10 +245,10 @@ impl<const CAP: usize> Framer<CAP> {
         self.released = 0;
     }
 
-    fn poll_input<'a, 'b: 'a>(&'a mut self, input: &mut &'b [u8], max: usize) -> Poll<'a> {
-        let data: &'b [u8] = input;
+    fn step_input(&mut self, input: &mut &[u8], max: usize) -> Step {
+        let data: &[u8] = input;
         if data.is_empty() {
-            return Poll::NeedMore;
+            return Step::NeedMore;
         }
         match data.iter().position(|&b| b == PREAMBLE) {
             Some(0) => {}
@@ -223,7 +258,7 @@ impl<const CAP: usize> Framer<CAP> {
                 self.counters.bytes_in += bytes as u64;
                 self.counters.bytes_skipped += bytes as u64;
                 self.counters.resyncs += 1;
-                return Poll::Dropped {
+                return Step::Dropped {
                     bytes,
                     error: FrameError::NoPreamble,
                 };
@@ -231,12 +266,11 @@ impl<const CAP: usize> Framer<CAP> {
         }
         match scan(data, max) {
             Scan::Complete { len } => {
-                let (frame, rest) = data.split_at(len);
-                *input = rest;
+                *input = data.get(len..).unwrap_or_default();
                 self.counters.bytes_in += len as u64;
                 self.counters.frames_ok += 1;
                 self.counters.frame_bytes += len as u64;
-                Poll::Frame(XbusFrame::from_scanned(frame))
+                Step::Input(len)
             }
             Scan::Invalid(error) => {
                 *input = data.get(1..).unwrap_or_default();
@@ -244,7 +278,7 @@ impl<const CAP: usize> Framer<CAP> {
                 self.count_bad(&error);
                 self.counters.bytes_skipped += 1;
                 self.counters.resyncs += 1;
-                Poll::Dropped { bytes: 1, error }
+                Step::Dropped { bytes: 1, error }
             }
             Scan::Incomplete { .. } => {
                 // Incomplete implies the frame's claimed length is within `max`, so all of it fits.
@@ -255,25 +289,23 @@ impl<const CAP: usize> Framer<CAP> {
                 *input = rest;
                 self.counters.bytes_in += n as u64;
                 if rest.is_empty() {
-                    Poll::NeedMore
+                    Step::NeedMore
                 } else {
-                    self.poll(input)
+                    self.step(input)
                 }
             }
         }
     }
 
-    fn release(&mut self, len: usize) -> Poll<'_> {
+    fn release(&mut self, len: usize) -> Step {
         self.released = len;
         self.counters.frames_ok += 1;
         self.counters.frame_bytes += len as u64;
-        Poll::Frame(XbusFrame::from_scanned(
-            self.buf.get(..len).unwrap_or_default(),
-        ))
+        Step::Buffer(len)
     }
 
     /// Gives up the first buffered byte and everything up to the next preamble in the buffer.
-    fn reject_buffered(&mut self, error: FrameError) -> Poll<'static> {
+    fn reject_buffered(&mut self, error: FrameError) -> Step {
         self.count_bad(&error);
         let next = self
             .buf
@@ -284,7 +316,7 @@ impl<const CAP: usize> Framer<CAP> {
         self.drain_front(next);
         self.counters.bytes_skipped += next as u64;
         self.counters.resyncs += 1;
-        Poll::Dropped { bytes: next, error }
+        Step::Dropped { bytes: next, error }
     }
 
     fn count_bad(&mut self, error: &FrameError) {
@@ -328,14 +360,13 @@ mod tests {
         assert!(input.is_empty());
     }
 
-    fn run_chunks(
-        data: &[u8],
-        chunk: usize,
-    ) -> (
+    type Outcome = (
         std::vec::Vec<(u8, std::vec::Vec<u8>)>,
         std::vec::Vec<FrameError>,
         Counters,
-    ) {
+    );
+
+    fn run_chunks(data: &[u8], chunk: usize) -> Outcome {
         let mut framer = Framer::<{ crate::frame_capacity(400) }>::new();
         let (mut out, mut errs) = (std::vec::Vec::new(), std::vec::Vec::new());
         for c in data.chunks(chunk.max(1)) {

@@ -285,7 +285,7 @@ pub struct OutputConfiguration<'a> {
 impl<'a> OutputConfiguration<'a> {
     /// Checks that the payload is whole pairs.
     pub fn new_checked(payload: &'a [u8]) -> Result<Self, MessageError> {
-        if payload.len() % 4 != 0 {
+        if !payload.len().is_multiple_of(4) {
             return Err(MessageError::BadLength {
                 mid: mid::OUTPUT_CONFIGURATION,
                 len: payload.len(),

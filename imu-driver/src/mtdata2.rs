@@ -712,7 +712,7 @@ impl fmt::Display for UtcTime {
         if self.nanos != 0 {
             let mut n = self.nanos;
             let mut digits = 9;
-            while n % 10 == 0 {
+            while n.is_multiple_of(10) {
                 n /= 10;
                 digits -= 1;
             }

@@ -1,1 +1,11 @@
-//! Host side (std).
+//! Host side (feature `std`): a reader that stamps frames with host monotonic time, and device
+//! control over a serial port.
+
+pub mod device;
+pub mod reader;
+
+pub use device::{
+    compare_rates, ConfigReport, ControlStep, Device, DeviceError, HostBaud, OutputReport, Plan,
+    RateDifference, Reply,
+};
+pub use reader::{Event, Reader};
