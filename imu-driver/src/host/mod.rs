@@ -9,3 +9,6 @@ pub use device::{
     RateDifference, Reply,
 };
 pub use reader::{Event, Reader};
+
+/// The serial-port crate this module is built on (for opening ports and pseudo-terminals).
+pub use serialport;
