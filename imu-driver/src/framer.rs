@@ -499,4 +499,48 @@ mod tests {
             assert_eq!(c.frame_bytes + c.bytes_skipped, c.bytes_in);
         }
     }
+
+    fn big_frame(len: usize) -> std::vec::Vec<u8> {
+        let payload: std::vec::Vec<u8> = (0..len).map(|i| (i % 251) as u8).collect();
+        let mut out = vec![0u8; len + 7];
+        let n = crate::encode_frame(&mut out, 0xFF, 0x36, &payload).unwrap();
+        out.truncate(n);
+        out
+    }
+
+    #[test]
+    fn extended_frames_of_255_bytes_and_more_in_any_chunking() {
+        for len in [254, 255, 256, 400] {
+            let frame = big_frame(len);
+            assert_eq!(frame.len(), if len < 255 { len + 5 } else { len + 7 });
+            let data = [&frame[..], &ACK[..]].concat();
+            for chunk in [1, 2, 6, 100, data.len()] {
+                let (out, errs, _) = run_chunks(&data, chunk);
+                assert!(errs.is_empty(), "len {len} chunk {chunk}: {errs:?}");
+                assert_eq!(out.len(), 2);
+                assert_eq!(out[0].1.len(), len);
+            }
+        }
+    }
+
+    #[test]
+    fn payload_limit_is_the_callers_choice() {
+        // An MT Manager .mtb log frame of 15,410 bytes.
+        let frame = big_frame(15_410);
+        let mut log = Framer::<{ crate::frame_capacity(65_535) }>::new();
+        let mut input = &frame[..];
+        assert!(matches!(log.poll(&mut input), Poll::Frame(f) if f.payload().len() == 15_410));
+        let mut small = Framer::<{ crate::frame_capacity(2048) }>::new();
+        let mut input = &frame[..];
+        assert_eq!(
+            small.poll(&mut input),
+            Poll::Dropped {
+                bytes: 1,
+                error: FrameError::LengthTooLarge {
+                    len: 15_410,
+                    max: 2048
+                }
+            }
+        );
+    }
 }
