@@ -262,7 +262,7 @@ impl Baudrate {
 pub struct OutputSetting {
     /// The output.
     pub id: DataId,
-    /// Rate [Hz]; 0 and 0xFFFF mean "as fast as possible" ([`OutputSetting::MAX_RATE`]).
+    /// Rate \[Hz\]; 0 and 0xFFFF mean "as fast as possible" ([`OutputSetting::MAX_RATE`]).
     pub rate_hz: u16,
 }
 
@@ -355,7 +355,7 @@ impl fmt::Display for FirmwareRev {
 pub struct Configuration {
     /// Device id of the master.
     pub master_device_id: u32,
-    /// Sampling period [1/115200 s].
+    /// Sampling period \[1/115200 s\].
     pub sampling_period: u16,
     /// Output skip factor.
     pub output_skip_factor: u16,
@@ -369,7 +369,7 @@ pub struct Configuration {
     pub num_devices: u16,
     /// Device id of the first device.
     pub device_id: u32,
-    /// Length of its legacy MTData payload [bytes].
+    /// Length of its legacy MTData payload \[bytes\].
     pub data_length: u16,
     /// Legacy output mode.
     pub output_mode: u16,
@@ -598,17 +598,17 @@ pub mod output_settings {
 /// Legacy MTData (0x32), whose layout is fixed by the output mode and settings in force.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct LegacyMtData {
-    /// Temperature [°C].
+    /// Temperature \[°C\].
     pub temperature: Option<f64>,
-    /// Acceleration [m/s^2].
+    /// Acceleration \[m/s^2\].
     pub acceleration: Option<[f64; 3]>,
-    /// Rate of turn [rad/s].
+    /// Rate of turn \[rad/s\].
     pub rate_of_turn: Option<[f64; 3]>,
-    /// Magnetic field [a.u.].
+    /// Magnetic field \[a.u.\].
     pub magnetic_field: Option<[f64; 3]>,
     /// Quaternion (q0 scalar).
     pub quaternion: Option<[f64; 4]>,
-    /// Roll, pitch, yaw [deg].
+    /// Roll, pitch, yaw \[deg\].
     pub euler_angles: Option<[f64; 3]>,
     /// Rotation matrix, wire order.
     pub rotation_matrix: Option<[f64; 9]>,

@@ -201,57 +201,57 @@ pub enum Layout {
 }
 
 data_kinds! {
-    /// Temperature [°C].
+    /// Temperature \[°C\].
     Temperature = 0x0810, "Temperature", "temperature", Layout::Floats(1);
     /// UTC time (12 bytes).
     UtcTime = 0x1010, "UTCTime", "utc_time", Layout::Fixed(12);
     /// Packet counter (u16, wraps).
     PacketCounter = 0x1020, "PacketCounter", "packet_counter", Layout::Fixed(2);
-    /// Sample time [1/10 ms ticks] (u32).
+    /// Sample time \[1/10 ms ticks\] (u32).
     SampleTimeFine = 0x1060, "SampleTimeFine", "sample_time_fine", Layout::Fixed(4);
-    /// Sample time [s] (u32).
+    /// Sample time \[s\] (u32).
     SampleTimeCoarse = 0x1070, "SampleTimeCoarse", "sample_time_coarse", Layout::Fixed(4);
     /// Orientation quaternion q0 (scalar), q1, q2, q3.
     Quaternion = 0x2010, "Quaternion", "quaternion", Layout::Floats(4);
     /// Rotation matrix, 9 values in wire order.
     RotationMatrix = 0x2020, "RotationMatrix", "rotation_matrix", Layout::Floats(9);
-    /// Euler angles roll, pitch, yaw [deg] (Z-Y'-X'').
+    /// Euler angles roll, pitch, yaw \[deg\] (Z-Y'-X'').
     EulerAngles = 0x2030, "EulerAngles", "euler_angles", Layout::Floats(3);
-    /// Barometric pressure [Pa] (u32).
+    /// Barometric pressure \[Pa\] (u32).
     BaroPressure = 0x3010, "BaroPressure", "baro_pressure", Layout::Fixed(4);
-    /// Velocity increment [m/s], sensor frame.
+    /// Velocity increment \[m/s\], sensor frame.
     DeltaV = 0x4010, "DeltaV", "delta_v", Layout::Floats(3);
-    /// Calibrated acceleration [m/s^2], sensor frame.
+    /// Calibrated acceleration \[m/s^2\], sensor frame.
     Acceleration = 0x4020, "Acceleration", "acceleration", Layout::Floats(3);
-    /// Free acceleration (gravity removed) [m/s^2], earth frame.
+    /// Free acceleration (gravity removed) \[m/s^2\], earth frame.
     FreeAcceleration = 0x4030, "FreeAcceleration", "free_acceleration", Layout::Floats(3);
-    /// High-rate acceleration [m/s^2], sensor frame.
+    /// High-rate acceleration \[m/s^2\], sensor frame.
     AccelerationHr = 0x4040, "AccelerationHR", "acceleration_hr", Layout::Floats(3);
-    /// Altitude above the WGS84 ellipsoid [m].
+    /// Altitude above the WGS84 ellipsoid \[m\].
     AltitudeEllipsoid = 0x5020, "AltitudeEllipsoid", "altitude_ellipsoid", Layout::Floats(1);
-    /// Position in ECEF [m].
+    /// Position in ECEF \[m\].
     PositionEcef = 0x5030, "PositionECEF", "position_ecef", Layout::Floats(3);
-    /// Latitude, longitude [deg].
+    /// Latitude, longitude \[deg\].
     LatLon = 0x5040, "LatLon", "lat_lon", Layout::Floats(2);
     /// GNSS position-velocity-time (94 bytes, u-blox NAV-PVT fields).
     GnssPvtData = 0x7010, "GNSSPVTData", "gnss_pvt_data", Layout::Fixed(94);
     /// GNSS satellite information.
     GnssSatInfo = 0x7020, "GNSSSatInfo", "gnss_sat_info", Layout::SatInfo;
-    /// Calibrated rate of turn [rad/s], sensor frame.
+    /// Calibrated rate of turn \[rad/s\], sensor frame.
     RateOfTurn = 0x8020, "RateOfTurn", "rate_of_turn", Layout::Floats(3);
     /// Orientation increment quaternion.
     DeltaQ = 0x8030, "DeltaQ", "delta_q", Layout::Floats(4);
-    /// High-rate rate of turn [rad/s], sensor frame.
+    /// High-rate rate of turn \[rad/s\], sensor frame.
     RateOfTurnHr = 0x8040, "RateOfTurnHR", "rate_of_turn_hr", Layout::Floats(3);
-    /// Magnetic field [a.u., normalised to the calibration field], sensor frame.
+    /// Magnetic field \[a.u., normalised to the calibration field\], sensor frame.
     MagneticField = 0xC020, "MagneticField", "magnetic_field", Layout::Floats(3);
-    /// Velocity [m/s], earth frame.
+    /// Velocity \[m/s\], earth frame.
     VelocityXyz = 0xD010, "VelocityXYZ", "velocity_xyz", Layout::Floats(3);
     /// Status byte (the low 8 bits of the status word).
     StatusByte = 0xE010, "StatusByte", "status_byte", Layout::Fixed(1);
     /// Status word (u32 bit field).
     StatusWord = 0xE020, "StatusWord", "status_word", Layout::Fixed(4);
-    /// Received signal strength [dBm] (wireless devices).
+    /// Received signal strength \[dBm\] (wireless devices).
     Rssi = 0xE040, "Rssi", "rssi", Layout::Fixed(1);
 }
 
@@ -569,57 +569,57 @@ fn floats<const N: usize>(d: &[u8], p: Precision) -> [f64; N] {
 /// A decoded MTData2 item. Vectors are `[x, y, z]`; quaternions `[q0 (scalar), q1, q2, q3]`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Value<'a> {
-    /// Temperature [°C].
+    /// Temperature \[°C\].
     Temperature(f64),
     /// UTC time.
     UtcTime(UtcTime),
     /// Packet counter (wraps at 2^16).
     PacketCounter(u16),
-    /// Sample time [1/10 ms ticks], wraps (see [`time`](crate::time)).
+    /// Sample time \[1/10 ms ticks\], wraps (see [`time`](crate::time)).
     SampleTimeFine(u32),
-    /// Sample time [s].
+    /// Sample time \[s\].
     SampleTimeCoarse(u32),
     /// Orientation quaternion, earth frame to sensor frame.
     Quaternion([f64; 4]),
     /// Rotation matrix in wire order (column-major: a=R11, b=R21, c=R31, d=R12, ...).
     RotationMatrix([f64; 9]),
-    /// Roll, pitch, yaw [deg].
+    /// Roll, pitch, yaw \[deg\].
     EulerAngles([f64; 3]),
-    /// Barometric pressure [Pa].
+    /// Barometric pressure \[Pa\].
     BaroPressure(u32),
-    /// Velocity increment [m/s].
+    /// Velocity increment \[m/s\].
     DeltaV([f64; 3]),
-    /// Acceleration [m/s^2], sensor frame.
+    /// Acceleration \[m/s^2\], sensor frame.
     Acceleration([f64; 3]),
-    /// Free acceleration [m/s^2], earth frame.
+    /// Free acceleration \[m/s^2\], earth frame.
     FreeAcceleration([f64; 3]),
-    /// High-rate acceleration [m/s^2], sensor frame.
+    /// High-rate acceleration \[m/s^2\], sensor frame.
     AccelerationHr([f64; 3]),
-    /// Altitude above the ellipsoid [m].
+    /// Altitude above the ellipsoid \[m\].
     AltitudeEllipsoid(f64),
-    /// ECEF position [m].
+    /// ECEF position \[m\].
     PositionEcef([f64; 3]),
-    /// Latitude, longitude [deg].
+    /// Latitude, longitude \[deg\].
     LatLon([f64; 2]),
     /// GNSS PVT record.
     GnssPvtData(GnssPvt),
     /// GNSS satellite information.
     GnssSatInfo(GnssSatInfo<'a>),
-    /// Rate of turn [rad/s], sensor frame.
+    /// Rate of turn \[rad/s\], sensor frame.
     RateOfTurn([f64; 3]),
     /// Orientation increment quaternion.
     DeltaQ([f64; 4]),
-    /// High-rate rate of turn [rad/s], sensor frame.
+    /// High-rate rate of turn \[rad/s\], sensor frame.
     RateOfTurnHr([f64; 3]),
-    /// Magnetic field [a.u.], sensor frame.
+    /// Magnetic field \[a.u.\], sensor frame.
     MagneticField([f64; 3]),
-    /// Velocity [m/s], earth frame.
+    /// Velocity \[m/s\], earth frame.
     VelocityXyz([f64; 3]),
     /// Status byte.
     StatusByte(u8),
     /// Status word.
     StatusWord(u32),
-    /// Received signal strength [dBm].
+    /// Received signal strength \[dBm\].
     Rssi(i8),
     /// An unknown id's raw bytes.
     Unknown(&'a [u8]),
@@ -726,7 +726,7 @@ impl fmt::Display for UtcTime {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[allow(missing_docs)]
 pub struct GnssPvt {
-    /// GPS time of week [ms].
+    /// GPS time of week \[ms\].
     pub itow: u32,
     pub year: u16,
     pub month: u8,
@@ -736,9 +736,9 @@ pub struct GnssPvt {
     pub sec: u8,
     /// Validity flags.
     pub valid: u8,
-    /// Time accuracy [ns].
+    /// Time accuracy \[ns\].
     pub t_acc: u32,
-    /// Fraction of second [ns], may be negative.
+    /// Fraction of second \[ns\], may be negative.
     pub nano: i32,
     /// 0 none, 2 2D, 3 3D, ...
     pub fix_type: u8,
@@ -746,35 +746,35 @@ pub struct GnssPvt {
     /// Satellites used.
     pub num_sv: u8,
     pub reserved1: u8,
-    /// Longitude [1e-7 deg].
+    /// Longitude \[1e-7 deg\].
     pub lon: i32,
-    /// Latitude [1e-7 deg].
+    /// Latitude \[1e-7 deg\].
     pub lat: i32,
-    /// Height above ellipsoid [mm].
+    /// Height above ellipsoid \[mm\].
     pub height: i32,
-    /// Height above mean sea level [mm].
+    /// Height above mean sea level \[mm\].
     pub hmsl: i32,
-    /// Horizontal accuracy [mm].
+    /// Horizontal accuracy \[mm\].
     pub h_acc: u32,
-    /// Vertical accuracy [mm].
+    /// Vertical accuracy \[mm\].
     pub v_acc: u32,
-    /// North velocity [mm/s].
+    /// North velocity \[mm/s\].
     pub vel_n: i32,
-    /// East velocity [mm/s].
+    /// East velocity \[mm/s\].
     pub vel_e: i32,
-    /// Down velocity [mm/s].
+    /// Down velocity \[mm/s\].
     pub vel_d: i32,
-    /// Ground speed [mm/s].
+    /// Ground speed \[mm/s\].
     pub g_speed: i32,
-    /// Heading of motion [1e-5 deg].
+    /// Heading of motion \[1e-5 deg\].
     pub head_mot: i32,
-    /// Speed accuracy [mm/s].
+    /// Speed accuracy \[mm/s\].
     pub s_acc: u32,
-    /// Heading accuracy [1e-5 deg].
+    /// Heading accuracy \[1e-5 deg\].
     pub head_acc: u32,
-    /// Heading of vehicle [1e-5 deg].
+    /// Heading of vehicle \[1e-5 deg\].
     pub head_veh: i32,
-    /// Dilutions of precision [0.01].
+    /// Dilutions of precision \[0.01\].
     pub gdop: u16,
     pub pdop: u16,
     pub tdop: u16,
@@ -856,7 +856,7 @@ impl GnssPvt {
 /// GNSS satellite information (0x7020): a header and 4 bytes per satellite.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct GnssSatInfo<'a> {
-    /// GPS time of week [ms].
+    /// GPS time of week \[ms\].
     pub itow: u32,
     /// Number of satellites that follow.
     pub num_svs: u8,
@@ -872,7 +872,7 @@ pub struct Satellite {
     pub gnss_id: u8,
     /// Satellite id within the system.
     pub sv_id: u8,
-    /// Carrier to noise ratio [dBHz].
+    /// Carrier to noise ratio \[dBHz\].
     pub cno: u8,
     /// Flags (quality, used for navigation, health, differential).
     pub flags: u8,
@@ -923,25 +923,25 @@ impl<'a> GnssSatInfo<'a> {
 pub struct Sample {
     /// Packet counter.
     pub packet_counter: Option<u16>,
-    /// Sample time [1/10 ms ticks], raw (wrapping).
+    /// Sample time \[1/10 ms ticks\], raw (wrapping).
     pub sample_time_fine: Option<u32>,
-    /// Acceleration [m/s^2], sensor frame.
+    /// Acceleration \[m/s^2\], sensor frame.
     pub acceleration: Option<[f64; 3]>,
-    /// Rate of turn [rad/s], sensor frame.
+    /// Rate of turn \[rad/s\], sensor frame.
     pub rate_of_turn: Option<[f64; 3]>,
-    /// Magnetic field [a.u.], sensor frame.
+    /// Magnetic field \[a.u.\], sensor frame.
     pub magnetic_field: Option<[f64; 3]>,
-    /// Velocity increment [m/s].
+    /// Velocity increment \[m/s\].
     pub delta_v: Option<[f64; 3]>,
     /// Orientation increment.
     pub delta_q: Option<[f64; 4]>,
     /// Orientation quaternion.
     pub quaternion: Option<[f64; 4]>,
-    /// Roll, pitch, yaw [deg].
+    /// Roll, pitch, yaw \[deg\].
     pub euler_angles: Option<[f64; 3]>,
-    /// Free acceleration [m/s^2].
+    /// Free acceleration \[m/s^2\].
     pub free_acceleration: Option<[f64; 3]>,
-    /// Temperature [°C].
+    /// Temperature \[°C\].
     pub temperature: Option<f64>,
     /// Status word (a status byte is widened).
     pub status: Option<u32>,

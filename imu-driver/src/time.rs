@@ -216,17 +216,17 @@ impl core::ops::BitOrAssign for Flags {
 /// Value ranges for the plausibility checks (generous: above any MTi's full scale).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Limits {
-    /// Largest acceleration component [m/s^2] (MTi full scale is 16 g; default 50 g).
+    /// Largest acceleration component \[m/s^2\] (MTi full scale is 16 g; default 50 g).
     pub max_acceleration: f64,
-    /// Largest rate-of-turn component [rad/s] (full scale 2000 deg/s; default 50 rad/s).
+    /// Largest rate-of-turn component \[rad/s\] (full scale 2000 deg/s; default 50 rad/s).
     pub max_rate_of_turn: f64,
-    /// Largest magnetic field component [a.u.].
+    /// Largest magnetic field component \[a.u.\].
     pub max_magnetic_field: f64,
     /// Allowed deviation of a quaternion's norm from 1.
     pub quaternion_norm_tolerance: f64,
-    /// Temperature range [°C].
+    /// Temperature range \[°C\].
     pub temperature: (f64, f64),
-    /// Largest forward SampleTimeFine step between messages of one kind [ticks] (default 10 s).
+    /// Largest forward SampleTimeFine step between messages of one kind \[ticks\] (default 10 s).
     pub max_time_step_ticks: u64,
 }
 
@@ -288,7 +288,7 @@ pub struct Checked {
     pub flags: Flags,
     /// Packet counter continuity, if the message has a counter.
     pub continuity: Option<Continuity>,
-    /// Unwrapped SampleTimeFine [ticks], if the message has one.
+    /// Unwrapped SampleTimeFine \[ticks\], if the message has one.
     pub time_ticks: Option<u64>,
     /// The message kind the time was checked against.
     pub kind: MessageKind,

@@ -158,9 +158,9 @@ pub struct Reply {
 pub struct RateDifference {
     /// The output.
     pub id: DataId,
-    /// Requested rate [Hz] (`None`: not requested, yet configured).
+    /// Requested rate \[Hz\] (`None`: not requested, yet configured).
     pub requested: Option<u16>,
-    /// Rate in force [Hz] (`None`: requested but absent from the ack).
+    /// Rate in force \[Hz\] (`None`: requested but absent from the ack).
     pub actual: Option<u16>,
 }
 
