@@ -8,30 +8,39 @@ use libfuzzer_sys::fuzz_target;
 type Small = Framer<{ frame_capacity(256) }>;
 type Big = Framer<{ frame_capacity(65_535) }>;
 
-/// Frames found (as bytes) feeding `data` in chunks of `chunk` bytes.
+fn check<const N: usize>(f: XbusFrame<'_>, out: &mut Vec<Vec<u8>>) {
+    assert_eq!(XbusFrame::new_checked(f.as_bytes()), Ok(f));
+    assert!(f.payload().len() <= framer_max::<N>());
+    if let Ok(Message::MtData2(m)) = Message::decode(&f) {
+        for item in m.items().flatten() {
+            let _ = item.value();
+        }
+    }
+    out.push(f.as_bytes().to_vec());
+}
+
+/// Frames found (as bytes) feeding `data` in chunks of `chunk` bytes, then ending the input.
 fn frames<const N: usize>(framer: &mut Framer<N>, data: &[u8], chunk: usize) -> Vec<Vec<u8>> {
     let mut out = Vec::new();
     for c in data.chunks(chunk) {
         let mut input = c;
         loop {
             match framer.poll(&mut input) {
-                Poll::Frame(f) => {
-                    assert_eq!(XbusFrame::new_checked(f.as_bytes()), Ok(f));
-                    assert!(f.payload().len() <= framer_max::<N>());
-                    if let Ok(Message::MtData2(m)) = Message::decode(&f) {
-                        for item in m.items().flatten() {
-                            let _ = item.value();
-                        }
-                    }
-                    out.push(f.as_bytes().to_vec());
-                }
+                Poll::Frame(f) => check::<N>(f, &mut out),
                 Poll::Dropped { bytes, .. } => assert!(bytes > 0),
                 Poll::NeedMore => break,
             }
         }
         assert!(input.is_empty());
     }
-    framer.finish();
+    loop {
+        match framer.poll_end() {
+            Poll::Frame(f) => check::<N>(f, &mut out),
+            Poll::Dropped { bytes, .. } => assert!(bytes > 0),
+            Poll::NeedMore => break,
+        }
+    }
+    assert_eq!(framer.finish(), None);
     let c = framer.counters();
     assert_eq!(c.bytes_in, data.len() as u64);
     assert_eq!(c.frame_bytes + c.bytes_skipped, c.bytes_in);

@@ -218,7 +218,36 @@ impl<const CAP: usize> Framer<CAP> {
         }
     }
 
-    /// Reports a frame cut off by the end of the input, if any, and empties the buffer.
+    /// Ends the input: like [`poll`](Self::poll) with no more bytes to come, so an incomplete
+    /// candidate is rejected as [`FrameError::Truncated`] (giving up one byte, as for a bad
+    /// checksum) and frames that lie inside it are still found. Call until it returns
+    /// [`Poll::NeedMore`]; the framer is then empty and can take a new stream.
+    pub fn poll_end(&mut self) -> Poll<'_> {
+        match self.step_end() {
+            Step::Buffer(len) => Poll::Frame(self.buffered_frame(len)),
+            Step::Dropped { bytes, error } => Poll::Dropped { bytes, error },
+            Step::Input(_) | Step::NeedMore => Poll::NeedMore,
+        }
+    }
+
+    /// [`poll_end`](Self::poll_end) without the borrow.
+    pub(crate) fn step_end(&mut self) -> Step {
+        let mut none: &[u8] = &[];
+        match self.step(&mut none) {
+            Step::NeedMore if !self.buf.is_empty() => {
+                let have = self.buf.len();
+                let need = match scan(&self.buf, self.max_payload()) {
+                    Scan::Incomplete { need } => need,
+                    _ => have,
+                };
+                self.reject_buffered(FrameError::Truncated { have, need })
+            }
+            other => other,
+        }
+    }
+
+    /// Ends the input, dropping whatever is buffered: reports a frame cut off by the end of the
+    /// input, if any. [`poll_end`](Self::poll_end) also finds frames inside such a tail.
     pub fn finish(&mut self) -> Option<FrameError> {
         if self.released > 0 {
             self.drain_front(self.released);
@@ -542,5 +571,35 @@ mod tests {
                 }
             }
         );
+    }
+
+    #[test]
+    fn poll_end_finds_frames_inside_a_truncated_candidate() {
+        // A corrupted LEN claims 10 bytes but the input ends after a good frame inside them.
+        let data = [&[0xFA, 0xFF, 0x36, 0x0A][..], &FW[..]].concat();
+        for chunk in [1, 5, data.len()] {
+            let mut framer = Framer::<64>::new();
+            let (mut out, mut errs) = (std::vec::Vec::new(), std::vec::Vec::new());
+            for c in data.chunks(chunk) {
+                collect(&mut framer, c, &mut out, &mut errs);
+            }
+            assert!(out.is_empty(), "still waiting for the claimed 15 bytes");
+            loop {
+                match framer.poll_end() {
+                    Poll::Frame(f) => out.push((f.mid(), f.payload().to_vec())),
+                    Poll::Dropped { error, .. } => errs.push(error),
+                    Poll::NeedMore => break,
+                }
+            }
+            assert_eq!(out, vec![(0x13, vec![1, 2, 3])], "chunk {chunk}");
+            assert_eq!(errs, vec![FrameError::Truncated { have: 12, need: 15 }]);
+            let c = framer.counters();
+            assert_eq!(
+                (c.frames_bad.truncated, c.bytes_skipped, c.frame_bytes),
+                (1, 4, 8)
+            );
+            assert_eq!(framer.buffered(), 0);
+            assert_eq!(framer.finish(), None);
+        }
     }
 }

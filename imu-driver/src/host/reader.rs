@@ -95,7 +95,7 @@ impl<R: Read, const CAP: usize> Reader<R, CAP> {
     }
 
     /// The next frame or dropped-bytes event; `Ok(None)` at end of input (a trailing partial
-    /// frame is reported as [`FrameError::Truncated`] first).
+    /// frame is reported as [`FrameError::Truncated`] first, see [`Framer::poll_end`]).
     ///
     /// Errors of the source are returned as they are (a serial port's `TimedOut` included) and the
     /// reader stays usable; `Interrupted` is retried.
@@ -126,13 +126,14 @@ impl<R: Read, const CAP: usize> Reader<R, CAP> {
                 Step::NeedMore => {}
             }
             if self.eof {
-                return Ok(self.framer.finish().map(|error| Event::Dropped {
-                    bytes: match error {
-                        FrameError::Truncated { have, .. } => have,
-                        _ => 0,
-                    },
-                    error,
-                }));
+                return Ok(match self.framer.step_end() {
+                    Step::Buffer(len) => Some(Event::Frame {
+                        frame: self.framer.buffered_frame(len),
+                        at: self.stamp,
+                    }),
+                    Step::Dropped { bytes, error } => Some(Event::Dropped { bytes, error }),
+                    Step::Input(_) | Step::NeedMore => None,
+                });
             }
             self.start = 0;
             self.end = 0;
