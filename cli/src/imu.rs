@@ -592,3 +592,77 @@ fn config(args: &ConfigArgs) -> Result<(), Box<dyn std::error::Error>> {
     out.flush()?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use imu_driver::{MtData2Writer, XbusFrame};
+
+    #[test]
+    fn output_names_map_to_ids_in_precision_and_frame() {
+        let id = output_id("acceleration", Precision::Fp1220, CoordinateFrame::Ned).unwrap();
+        assert_eq!(
+            id,
+            DataId(0x4021),
+            "frame bits only on orientation/velocity"
+        );
+        let id = output_id("quaternion", Precision::Float64, CoordinateFrame::Ned).unwrap();
+        assert_eq!(id, DataId(0x2017));
+        let id = output_id("packet_counter", Precision::Float64, CoordinateFrame::Ned).unwrap();
+        assert_eq!(id, DataId(0x1020), "no format bits on fixed layouts");
+        let err = output_id("accel", Precision::Float32, CoordinateFrame::Enu).unwrap_err();
+        assert!(err.contains("rate_of_turn"), "{err}");
+    }
+
+    #[test]
+    fn mtdata2_records_as_json_and_csv() {
+        let mut buf = [0u8; 128];
+        let mut w = MtData2Writer::new(&mut buf);
+        w.value(DataId(0x1020), &Value::PacketCounter(7)).unwrap();
+        w.value(DataId(0x1060), &Value::SampleTimeFine(12_345))
+            .unwrap();
+        w.value(DataId(0x4020), &Value::Acceleration([0.5, -1.0, 9.75]))
+            .unwrap();
+        w.item(DataId(0x9990), &[0xAB]).unwrap();
+        let n = w.finish(0xFF).unwrap();
+        let frame = XbusFrame::new_checked(&buf[..n]).unwrap();
+        let mut checker = Checker::new(TimeWrap::Pow32);
+        let mut summary = Summary::default();
+        let r = Record::new(&frame, &mut checker, &mut summary);
+        let j = r.json(None);
+        assert_eq!(j["mid"], 0x36);
+        assert_eq!(j["bus_id"], 0xFF);
+        assert_eq!(j["msg"], "MTData2");
+        assert_eq!(j["packet_counter"], 7);
+        assert_eq!(j["sample_time_fine"], 12_345);
+        assert_eq!(j["acceleration"], json!([0.5, -1.0, 9.75]));
+        assert_eq!(j["0x9990"], "AB");
+        assert_eq!(j["time_s"], 1.2345);
+        let row = r.csv().unwrap();
+        assert_eq!(row.split(',').count(), CSV_HEADER.split(',').count());
+        assert!(
+            row.starts_with("54,255,7,12345,1.2345,0.5,-1,9.75,"),
+            "{row}"
+        );
+        assert_eq!(summary.per_id.get(&0x4020), Some(&1));
+        assert_eq!(summary.per_mid.get(&0x36), Some(&1));
+    }
+
+    #[test]
+    fn error_replies_as_json() {
+        let mut buf = [0u8; 16];
+        let n = imu_driver::encode_frame(&mut buf, 0xFF, mid::ERROR, &[0x04]).unwrap();
+        let frame = XbusFrame::new_checked(&buf[..n]).unwrap();
+        let r = Record::new(
+            &frame,
+            &mut Checker::new(TimeWrap::Pow32),
+            &mut Summary::default(),
+        );
+        let j = r.json(None);
+        assert_eq!(
+            (j["error_code"].clone(), j["error"].clone()),
+            (json!(4), json!("invalid message"))
+        );
+        assert_eq!(r.csv(), None);
+    }
+}
