@@ -198,6 +198,9 @@ impl<const CAP: usize> Framer<CAP> {
                 };
             }
             let need = match scan(&self.buf, max) {
+                Scan::Incomplete { need } if need > CAP => {
+                    return self.reject_buffered(FrameError::LengthTooLarge { len: need, max })
+                }
                 Scan::Incomplete { need } => need,
                 Scan::Complete { len } => return self.release(len),
                 Scan::Invalid(error) => return self.reject_buffered(error),
@@ -207,12 +210,8 @@ impl<const CAP: usize> Framer<CAP> {
             }
             let take = need.saturating_sub(self.buf.len()).min(input.len());
             let (head, tail) = input.split_at(take);
-            // `need` never exceeds CAP: scan rejects lengths above `max` before asking for them.
-            if self.buf.extend_from_slice(head).is_err() {
-                self.counters.bytes_in += head.len() as u64;
-                *input = tail;
-                return self.reject_buffered(FrameError::LengthTooLarge { len: need, max });
-            }
+            // Cannot fail: `need <= CAP` was checked above.
+            let _ = self.buf.extend_from_slice(head);
             self.counters.bytes_in += take as u64;
             *input = tail;
         }
@@ -293,7 +292,14 @@ impl<const CAP: usize> Framer<CAP> {
                 };
             }
         }
-        match scan(data, max) {
+        let scanned = match scan(data, max) {
+            // Only a framer too small for a header (CAP < 6) gets here.
+            Scan::Incomplete { need } if need > CAP => {
+                Scan::Invalid(FrameError::LengthTooLarge { len: need, max })
+            }
+            other => other,
+        };
+        match scanned {
             Scan::Complete { len } => {
                 *input = data.get(len..).unwrap_or_default();
                 self.counters.bytes_in += len as u64;
@@ -310,18 +316,12 @@ impl<const CAP: usize> Framer<CAP> {
                 Step::Dropped { bytes: 1, error }
             }
             Scan::Incomplete { .. } => {
-                // Incomplete implies the frame's claimed length is within `max`, so all of it fits.
-                let n = data.len().min(CAP);
-                let (head, rest) = data.split_at(n);
+                // All of `data` is shorter than the candidate, which fits in CAP (checked above).
                 self.buf.clear();
-                let _ = self.buf.extend_from_slice(head);
-                *input = rest;
-                self.counters.bytes_in += n as u64;
-                if rest.is_empty() {
-                    Step::NeedMore
-                } else {
-                    self.step(input)
-                }
+                let _ = self.buf.extend_from_slice(data);
+                *input = &[];
+                self.counters.bytes_in += data.len() as u64;
+                Step::NeedMore
             }
         }
     }
@@ -601,5 +601,44 @@ mod tests {
             assert_eq!(framer.buffered(), 0);
             assert_eq!(framer.finish(), None);
         }
+    }
+
+    #[test]
+    fn degenerate_capacities_never_loop_or_lose_count() {
+        let data = [
+            &ACK[..],
+            &[0xFA, 0xFF, 0x36, 0xFF, 0x00, 0x01, 0x00, 0xCB][..],
+            &FW[..],
+        ]
+        .concat();
+        fn drive<const N: usize>(data: &[u8]) -> Counters {
+            let mut framer = Framer::<N>::new();
+            for c in data.chunks(3) {
+                let mut input = c;
+                while framer.poll(&mut input) != Poll::NeedMore {}
+            }
+            while framer.poll_end() != Poll::NeedMore {}
+            *framer.counters()
+        }
+        for c in [
+            drive::<0>(&data),
+            drive::<4>(&data),
+            drive::<5>(&data),
+            drive::<7>(&data),
+        ] {
+            assert_eq!(c.bytes_in, data.len() as u64);
+            assert_eq!(c.frame_bytes + c.bytes_skipped, c.bytes_in);
+        }
+        assert_eq!(
+            drive::<5>(&data).frames_ok,
+            1,
+            "the empty ack fits in 5 bytes"
+        );
+        assert_eq!(
+            drive::<8>(&data).frames_ok,
+            2,
+            "and the 1-byte extended frame in 8"
+        );
+        assert_eq!(drive::<10>(&data).frames_ok, 3);
     }
 }
