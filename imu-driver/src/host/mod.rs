@@ -3,12 +3,14 @@
 
 pub mod device;
 pub mod reader;
+pub mod samples;
 
 pub use device::{
     compare_rates, ConfigReport, ControlStep, Device, DeviceError, HostBaud, OutputReport, Plan,
     RateDifference, Reply,
 };
 pub use reader::{Event, Reader};
+pub use samples::{Samples, TimedSample};
 
 /// The serial-port crate this module is built on (for opening ports and pseudo-terminals).
 pub use serialport;
