@@ -13,7 +13,8 @@
 //! 4. [`mtdata2`]: the MTData2 item iterator and its typed [`Value`]s in all four precisions.
 //! 5. [`time`]: SampleTimeFine unwrapping, PacketCounter continuity and plausibility [`Flags`].
 //! 6. [`encode`]: frames for every host message, and an MTData2 writer.
-//! 7. `host` (feature `std`): a reader that stamps frames with host time, and device control.
+//! 7. [`reduced`]: the reduced Xbus of the MTi-1 series over I2C/SPI (MTSSP pipes).
+//! 8. `host` (feature `std`): a reader that stamps frames with host time, and device control.
 //!
 //! ```
 //! use imu_driver::{Framer, Message, Poll, Value};
@@ -37,6 +38,7 @@ pub mod frame;
 pub mod framer;
 pub mod message;
 pub mod mtdata2;
+pub mod reduced;
 pub mod time;
 
 #[cfg(feature = "std")]
