@@ -71,7 +71,7 @@ pub struct ConfigArgs {
     /// Current baud rate of the device.
     #[arg(long, default_value_t = 115_200)]
     baud: u32,
-    /// Output rate [Hz] of the data outputs (time, counter and status come with every message).
+    /// Output rate of the data outputs, in Hz (time, counter and status come with every message).
     #[arg(long, default_value_t = 100)]
     rate: u16,
     /// Outputs, comma separated, by snake_case name (acceleration, rate_of_turn, quaternion, ...).
@@ -93,7 +93,7 @@ pub struct ConfigArgs {
     /// Stay in config mode at the end.
     #[arg(long)]
     no_measure: bool,
-    /// Timeout of each step [ms].
+    /// Timeout of each step, in ms.
     #[arg(long, default_value_t = 1000)]
     timeout_ms: u64,
 }
@@ -152,7 +152,7 @@ struct Summary {
     per_id: BTreeMap<u16, u64>,
     item_errors: u64,
     message_errors: u64,
-    /// Per message kind: last unwrapped SampleTimeFine, steps between messages [ticks], count.
+    /// Per message kind: last unwrapped SampleTimeFine, steps between messages (ticks), count.
     times: BTreeMap<&'static str, (u64, Vec<u64>, u64)>,
 }
 

@@ -80,7 +80,7 @@ pub struct DumpArgs {
     /// Stop after this many good frames.
     #[arg(long)]
     max_frames: Option<u64>,
-    /// Read size [B] (files only; a serial port delivers what it has).
+    /// Read size in bytes (files only; a serial port delivers what it has).
     #[arg(long, default_value_t = 4096)]
     chunk: usize,
 }
@@ -92,7 +92,7 @@ pub struct ConfigArgs {
     cli_port: String,
     /// The .cfg to upload.
     file: PathBuf,
-    /// Time to wait for each line's Done/Error [ms].
+    /// Time to wait for each line's Done/Error, in ms.
     #[arg(long, default_value_t = 2000)]
     timeout_ms: u64,
 }
