@@ -9,6 +9,7 @@ use std::process::ExitCode;
 
 mod imu;
 mod output;
+mod pose;
 mod radar;
 
 #[derive(Debug, Parser)]
@@ -30,6 +31,9 @@ enum Command {
     /// Xsens MTi IMU: dump messages, configure a device.
     #[command(subcommand)]
     Imu(imu::ImuCmd),
+    /// Pose link: listen to a pose stream (UDP or serial) and print or save it.
+    #[command(subcommand)]
+    Pose(pose::PoseCmd),
 }
 
 fn main() -> ExitCode {
@@ -37,6 +41,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Radar(cmd) => radar::run(cmd),
         Command::Imu(cmd) => imu::run(cmd),
+        Command::Pose(cmd) => pose::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
