@@ -11,6 +11,7 @@ mod imu;
 mod output;
 mod pose;
 mod radar;
+mod selftest;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -34,6 +35,9 @@ enum Command {
     /// Pose link: listen to a pose stream (UDP or serial) and print or save it.
     #[command(subcommand)]
     Pose(pose::PoseCmd),
+    /// Single-threaded self-check of decoders (and, later, the model) with digests that must match
+    /// across architectures.
+    Selftest(selftest::SelftestArgs),
 }
 
 fn main() -> ExitCode {
@@ -42,6 +46,7 @@ fn main() -> ExitCode {
         Command::Radar(cmd) => radar::run(cmd),
         Command::Imu(cmd) => imu::run(cmd),
         Command::Pose(cmd) => pose::run(cmd),
+        Command::Selftest(a) => selftest::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
