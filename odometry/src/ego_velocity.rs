@@ -1,0 +1,411 @@
+//! Ego-velocity from radar Doppler.
+//!
+//! A static point seen in direction `d` (unit vector from the sensor) while the sensor moves with
+//! velocity `v` has radial velocity `v_r = -d . v` (negative when approaching, as TI reports it).
+//! Stacking the points gives an over-determined linear system in `v`. Moving objects and multipath
+//! ghosts violate it, so a RANSAC consensus on minimal samples picks the static set first; least
+//! squares on that set gives `v` and its covariance `sigma^2 (D^T D)^-1`.
+//!
+//! Geometry decides what is observable: points that all lie in one plane (a 2D radar, or a narrow
+//! elevation field) cannot tell the velocity across that plane. [`EgoVelocityEstimator`] checks the
+//! spread of the directions and reports [`Status::Degenerate`] naming the weak direction; with
+//! [`Model::Planar`] it estimates only the in-plane components.
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// One radar detection as the estimator sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Detection {
+    /// Position in the radar frame \[m\] (x right, y boresight, z up).
+    pub position: [f32; 3],
+    /// Radial (Doppler) velocity \[m/s\]; negative when approaching.
+    pub radial_velocity: f32,
+}
+
+/// Which velocity components to estimate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Model {
+    /// Full 3D velocity (needs elevation spread).
+    #[default]
+    Full3d,
+    /// x and y only, with z fixed to 0 (ground robots, or radars without elevation resolution).
+    Planar,
+}
+
+/// Estimator settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Config {
+    /// Components to estimate.
+    pub model: Model,
+    /// Doppler noise of a static point \[m/s\] (about the velocity resolution / 2).
+    pub sigma: f32,
+    /// Inlier threshold as a multiple of `sigma`.
+    pub inlier_sigmas: f32,
+    /// Minimum inliers to accept a solution.
+    pub min_inliers: usize,
+    /// Minimum inlier share of the usable points.
+    pub min_inlier_share: f32,
+    /// Maximum RANSAC iterations (fewer when the consensus is clear).
+    pub max_iterations: u32,
+    /// Desired probability of drawing one all-inlier sample.
+    pub confidence: f32,
+    /// Smallest direction spread accepted: the smallest eigenvalue of the normalised direction
+    /// scatter (sum d d^T / n) must exceed this, else that direction is unobservable.
+    pub min_spread: f32,
+    /// Points closer than this are skipped (direction undefined) \[m\].
+    pub min_range: f32,
+    /// RNG seed (the estimate is deterministic for a seed and input).
+    pub seed: u64,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            model: Model::Full3d,
+            sigma: 0.05,
+            inlier_sigmas: 3.0,
+            min_inliers: 5,
+            min_inlier_share: 0.1,
+            max_iterations: 1000,
+            confidence: 0.999,
+            min_spread: 1e-3,
+            min_range: 0.1,
+            seed: 0x5EED,
+        }
+    }
+}
+
+/// Why no (or only a partial) estimate is available.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Status {
+    /// A full estimate.
+    Ok,
+    /// Fewer usable points than a minimal sample.
+    TooFewPoints {
+        /// Usable points (range above `min_range`).
+        usable: usize,
+        /// Points a solution needs.
+        need: usize,
+    },
+    /// The directions do not span the estimated components.
+    Degenerate {
+        /// The weakest direction (unit vector, radar frame).
+        weak_direction: [f32; 3],
+        /// Its normalised spread (eigenvalue of the direction scatter).
+        spread: f32,
+    },
+    /// No hypothesis gathered enough inliers.
+    NoConsensus {
+        /// Best inlier count found.
+        best_inliers: usize,
+        /// Inliers required.
+        need: usize,
+    },
+}
+
+/// An ego-velocity estimate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Estimate {
+    /// Sensor velocity in the radar frame \[m/s\] (zeros unless `status` is `Ok`).
+    pub velocity: [f32; 3],
+    /// Covariance of `velocity` \[m^2/s^2\], row-major 3x3.
+    pub covariance: [[f32; 3]; 3],
+    /// What the estimate is worth.
+    pub status: Status,
+    /// Points used in the final least squares.
+    pub inliers: usize,
+    /// Usable points (range above the minimum).
+    pub usable: usize,
+    /// Points skipped for being too close to have a direction.
+    pub skipped: usize,
+    /// RMS residual of the inliers \[m/s\].
+    pub residual_rms: f32,
+    /// Inlier mask over the input detections (false for skipped points).
+    pub inlier_mask: Vec<bool>,
+    /// RANSAC iterations run.
+    pub iterations: u32,
+}
+
+impl Estimate {
+    /// True for a usable full estimate.
+    pub fn is_ok(&self) -> bool {
+        self.status == Status::Ok
+    }
+}
+
+/// Ego-velocity estimator (reuses its buffers between frames).
+#[derive(Debug, Clone)]
+pub struct EgoVelocityEstimator {
+    cfg: Config,
+    dirs: Vec<Vector3<f64>>,
+    vr: Vec<f64>,
+    idx: Vec<usize>,
+}
+
+impl EgoVelocityEstimator {
+    /// An estimator with `cfg`.
+    pub fn new(cfg: Config) -> Self {
+        EgoVelocityEstimator {
+            cfg,
+            dirs: Vec::new(),
+            vr: Vec::new(),
+            idx: Vec::new(),
+        }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &Config {
+        &self.cfg
+    }
+
+    /// Estimates the sensor velocity from one frame.
+    pub fn estimate(&mut self, detections: &[Detection]) -> Estimate {
+        let cfg = self.cfg;
+        self.dirs.clear();
+        self.vr.clear();
+        self.idx.clear();
+        for (i, d) in detections.iter().enumerate() {
+            let p = Vector3::new(
+                f64::from(d.position[0]),
+                f64::from(d.position[1]),
+                f64::from(d.position[2]),
+            );
+            let r = p.norm();
+            if !(r.is_finite() && r >= f64::from(cfg.min_range) && d.radial_velocity.is_finite()) {
+                continue;
+            }
+            let mut u = p / r;
+            if cfg.model == Model::Planar {
+                u.z = 0.0;
+            }
+            self.dirs.push(u);
+            self.vr.push(f64::from(d.radial_velocity));
+            self.idx.push(i);
+        }
+        let usable = self.dirs.len();
+        let mut est = Estimate {
+            velocity: [0.0; 3],
+            covariance: [[0.0; 3]; 3],
+            status: Status::Ok,
+            inliers: 0,
+            usable,
+            skipped: detections.len() - usable,
+            residual_rms: 0.0,
+            inlier_mask: vec![false; detections.len()],
+            iterations: 0,
+        };
+        let dof = match cfg.model {
+            Model::Full3d => 3,
+            Model::Planar => 2,
+        };
+        let need = dof.max(cfg.min_inliers);
+        if usable < need {
+            est.status = Status::TooFewPoints { usable, need };
+            return est;
+        }
+        if let Some((dir, spread)) = weakest_direction(&self.dirs, cfg.model) {
+            if spread < f64::from(cfg.min_spread) {
+                est.status = Status::Degenerate {
+                    weak_direction: [dir.x as f32, dir.y as f32, dir.z as f32],
+                    spread: spread as f32,
+                };
+                return est;
+            }
+        }
+
+        let thresh = f64::from(cfg.inlier_sigmas * cfg.sigma);
+        let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+        let mut best: Option<(usize, f64, Vector3<f64>)> = None;
+        let mut max_iter = cfg.max_iterations;
+        let mut it = 0;
+        let mut sample = [0usize; 3];
+        while it < max_iter {
+            it += 1;
+            for k in 0..dof {
+                loop {
+                    let c = rng.gen_range(0..usable);
+                    if !sample[..k].contains(&c) {
+                        sample[k] = c;
+                        break;
+                    }
+                }
+            }
+            let Some(v) = solve(
+                &self.dirs,
+                &self.vr,
+                sample[..dof].iter().copied(),
+                cfg.model,
+            ) else {
+                continue;
+            };
+            let (count, cost) = score(&self.dirs, &self.vr, &v, thresh);
+            if best
+                .as_ref()
+                .is_none_or(|b| count > b.0 || (count == b.0 && cost < b.1))
+            {
+                best = Some((count, cost, v));
+                // Adaptive stop: iterations for `confidence` with the current inlier share.
+                let w = count as f64 / usable as f64;
+                let p_good = w.powi(dof as i32);
+                if p_good > 0.0 && p_good < 1.0 {
+                    let n = (1.0 - f64::from(cfg.confidence)).ln() / (1.0 - p_good).ln();
+                    max_iter = max_iter.min(n.ceil().max(1.0) as u32).max(it);
+                } else if p_good >= 1.0 {
+                    max_iter = it;
+                }
+            }
+        }
+        est.iterations = it;
+        let need_inliers = cfg
+            .min_inliers
+            .max((cfg.min_inlier_share * usable as f32).ceil() as usize)
+            .max(dof);
+        let Some((count, _, v0)) = best else {
+            est.status = Status::NoConsensus {
+                best_inliers: 0,
+                need: need_inliers,
+            };
+            return est;
+        };
+        if count < need_inliers {
+            est.status = Status::NoConsensus {
+                best_inliers: count,
+                need: need_inliers,
+            };
+            return est;
+        }
+        // Least squares on the consensus set, then once more on the refined set.
+        let mut v = v0;
+        let mut inl: Vec<usize> = Vec::new();
+        for _ in 0..2 {
+            inl = (0..usable)
+                .filter(|&i| (self.vr[i] + self.dirs[i].dot(&v)).abs() <= thresh)
+                .collect();
+            if inl.len() < dof {
+                break;
+            }
+            if let Some(nv) = solve(&self.dirs, &self.vr, inl.iter().copied(), cfg.model) {
+                v = nv;
+            }
+        }
+        if inl.len() < need_inliers {
+            est.status = Status::NoConsensus {
+                best_inliers: inl.len(),
+                need: need_inliers,
+            };
+            return est;
+        }
+        let inlier_dirs: Vec<Vector3<f64>> = inl.iter().map(|&i| self.dirs[i]).collect();
+        if let Some((dir, spread)) = weakest_direction(&inlier_dirs, cfg.model) {
+            if spread < f64::from(cfg.min_spread) {
+                est.status = Status::Degenerate {
+                    weak_direction: [dir.x as f32, dir.y as f32, dir.z as f32],
+                    spread: spread as f32,
+                };
+                est.inliers = inl.len();
+                return est;
+            }
+        }
+        let ss: f64 = inl
+            .iter()
+            .map(|&i| (self.vr[i] + self.dirs[i].dot(&v)).powi(2))
+            .sum();
+        let rms = (ss / inl.len() as f64).sqrt();
+        // Noise: the residual spread, but never below the configured Doppler noise.
+        let sigma = (ss / (inl.len().saturating_sub(dof).max(1)) as f64)
+            .sqrt()
+            .max(f64::from(cfg.sigma));
+        let mut dtd = Matrix3::zeros();
+        for &i in &inl {
+            dtd += self.dirs[i] * self.dirs[i].transpose();
+        }
+        if cfg.model == Model::Planar {
+            dtd[(2, 2)] = 1.0;
+        }
+        let cov = dtd
+            .try_inverse()
+            .map(|m| m * sigma * sigma)
+            .unwrap_or_else(Matrix3::zeros);
+        est.velocity = [v.x as f32, v.y as f32, v.z as f32];
+        for r in 0..3 {
+            for c in 0..3 {
+                est.covariance[r][c] = if cfg.model == Model::Planar && (r == 2 || c == 2) {
+                    0.0
+                } else {
+                    cov[(r, c)] as f32
+                };
+            }
+        }
+        est.inliers = inl.len();
+        est.residual_rms = rms as f32;
+        for &i in &inl {
+            est.inlier_mask[self.idx[i]] = true;
+        }
+        est
+    }
+}
+
+/// Least squares for `v` in `vr_i = -d_i . v` over the given points.
+fn solve(
+    dirs: &[Vector3<f64>],
+    vr: &[f64],
+    pts: impl Iterator<Item = usize>,
+    model: Model,
+) -> Option<Vector3<f64>> {
+    let mut a = Matrix3::zeros();
+    let mut b = Vector3::zeros();
+    for i in pts {
+        a += dirs[i] * dirs[i].transpose();
+        b -= dirs[i] * vr[i];
+    }
+    if model == Model::Planar {
+        a[(2, 2)] = 1.0;
+        b.z = 0.0;
+    }
+    let chol = a.cholesky()?;
+    let v = chol.solve(&b);
+    v.iter().all(|x| x.is_finite()).then_some(v)
+}
+
+/// Inlier count and truncated squared cost of a hypothesis.
+fn score(dirs: &[Vector3<f64>], vr: &[f64], v: &Vector3<f64>, thresh: f64) -> (usize, f64) {
+    let mut count = 0;
+    let mut cost = 0.0;
+    for (d, r) in dirs.iter().zip(vr) {
+        let e = (r + d.dot(v)).abs();
+        if e <= thresh {
+            count += 1;
+            cost += e * e;
+        } else {
+            cost += thresh * thresh;
+        }
+    }
+    (count, cost)
+}
+
+/// The direction the points constrain least, and its normalised spread.
+fn weakest_direction(dirs: &[Vector3<f64>], model: Model) -> Option<(Vector3<f64>, f64)> {
+    let n = dirs.len() as f64;
+    let mut s = Matrix3::zeros();
+    for d in dirs {
+        s += d * d.transpose();
+    }
+    s /= n;
+    if model == Model::Planar {
+        // Only x-y matters: put a large value on z so it is never the weakest.
+        s[(2, 2)] = 1.0;
+        s[(0, 2)] = 0.0;
+        s[(2, 0)] = 0.0;
+        s[(1, 2)] = 0.0;
+        s[(2, 1)] = 0.0;
+    }
+    let e = SymmetricEigen::new(s);
+    let (k, val) =
+        e.eigenvalues.iter().enumerate().fold(
+            (0, f64::INFINITY),
+            |m, (i, &v)| if v < m.1 { (i, v) } else { m },
+        );
+    Some((e.eigenvectors.column(k).into_owned(), val))
+}

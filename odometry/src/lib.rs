@@ -1,0 +1,13 @@
+//! Classical radar-inertial odometry: the honest baseline beside the learned model, and the
+//! fallback that keeps the pose stream alive when the model is missing, unhealthy or too slow.
+//!
+//! * [`ego_velocity`]: the sensor's velocity from one radar frame's (direction, radial velocity)
+//!   pairs, with RANSAC against moving objects and multipath, a least-squares refinement, a
+//!   covariance, and degenerate geometry reported rather than silently wrong.
+//! * [`strapdown`]: IMU integration (orientation, velocity, position) used for dead reckoning and,
+//!   later, for the filter's propagation step.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod ego_velocity;
+pub mod strapdown;
