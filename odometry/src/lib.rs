@@ -4,10 +4,13 @@
 //! * [`ego_velocity`]: the sensor's velocity from one radar frame's (direction, radial velocity)
 //!   pairs, with RANSAC against moving objects and multipath, a least-squares refinement, a
 //!   covariance, and degenerate geometry reported rather than silently wrong.
+//! * [`rio`]: the error-state Kalman filter that fuses both (IMU propagation, radar velocity
+//!   updates, bias estimation, chi-square gating).
 //! * [`strapdown`]: IMU integration (orientation, velocity, position) used for dead reckoning and,
 //!   later, for the filter's propagation step.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod ego_velocity;
+pub mod rio;
 pub mod strapdown;

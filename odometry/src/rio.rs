@@ -1,0 +1,298 @@
+//! Radar-inertial odometry: an error-state Kalman filter that propagates with the IMU
+//! ([`crate::strapdown`]) and updates with radar ego-velocity ([`crate::ego_velocity`]).
+//!
+//! Nominal state: position `p` and velocity `v` in the world frame, body-to-world rotation `q`,
+//! accelerometer bias `b_a`, gyroscope bias `b_g` (body = IMU frame). Error state (15): `dp, dv,
+//! dtheta` (body-frame rotation error, `q = q_hat * Exp(dtheta)`), `db_a`, `db_g`.
+//!
+//! Measurement: the radar's velocity in its own frame,
+//! `h(x) = R_br^T (R^T v + (omega - b_g) x t_br)`, where `R_br`, `t_br` place the radar in the
+//! body frame (session extrinsics) and `omega` is the measured rate of turn. Measurements are
+//! gated with a chi-square test (3 dof) and rejected ones are counted.
+//!
+//! Time: the filter runs on the IMU clock. Radar measurements must already be mapped to it (the
+//! synchroniser's clock offset); a measurement is applied at the first IMU step at or after its
+//! time (at most one IMU period late).
+
+use crate::strapdown::{ImuSample, NavState, Strapdown};
+use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
+
+type M15 = SMatrix<f64, 15, 15>;
+type V15 = SVector<f64, 15>;
+type M3x15 = SMatrix<f64, 3, 15>;
+
+/// Noise densities and initial uncertainties.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RioConfig {
+    /// Accelerometer white noise \[m/s^2/sqrt(Hz)\].
+    pub accel_noise: f64,
+    /// Gyroscope white noise \[rad/s/sqrt(Hz)\].
+    pub gyro_noise: f64,
+    /// Accelerometer bias random walk \[m/s^3/sqrt(Hz)\].
+    pub accel_bias_walk: f64,
+    /// Gyroscope bias random walk \[rad/s^2/sqrt(Hz)\].
+    pub gyro_bias_walk: f64,
+    /// Initial velocity standard deviation \[m/s\].
+    pub init_velocity_std: f64,
+    /// Initial roll/pitch standard deviation \[rad\] (yaw starts at 0 and is unobservable).
+    pub init_tilt_std: f64,
+    /// Initial accelerometer bias standard deviation \[m/s^2\].
+    pub init_accel_bias_std: f64,
+    /// Initial gyroscope bias standard deviation \[rad/s\].
+    pub init_gyro_bias_std: f64,
+    /// Chi-square gate for radar updates (3 dof; 16.27 = 99.9%).
+    pub gate: f64,
+    /// Gravity magnitude \[m/s^2\].
+    pub gravity: f64,
+}
+
+impl Default for RioConfig {
+    /// MTi-1-class IMU (datasheet-level densities).
+    fn default() -> Self {
+        RioConfig {
+            accel_noise: 1.2e-3,
+            gyro_noise: 1.7e-4,
+            accel_bias_walk: 1e-4,
+            gyro_bias_walk: 2e-6,
+            init_velocity_std: 0.5,
+            init_tilt_std: 0.05,
+            init_accel_bias_std: 0.05,
+            init_gyro_bias_std: 0.01,
+            gate: 16.27,
+            gravity: crate::strapdown::STANDARD_GRAVITY,
+        }
+    }
+}
+
+/// Where the radar sits on the body: `p_body = R_br p_radar + t_br`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RadarMount {
+    /// Radar-to-body rotation.
+    pub rotation: UnitQuaternion<f64>,
+    /// Radar origin in the body frame \[m\].
+    pub translation: Vector3<f64>,
+}
+
+impl Default for RadarMount {
+    fn default() -> Self {
+        RadarMount {
+            rotation: UnitQuaternion::identity(),
+            translation: Vector3::zeros(),
+        }
+    }
+}
+
+/// A radar ego-velocity measurement on the IMU clock.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VelocityMeasurement {
+    /// Time on the IMU clock \[s\].
+    pub t: f64,
+    /// Radar velocity in the radar frame \[m/s\].
+    pub velocity: [f64; 3],
+    /// Its covariance \[m^2/s^2\].
+    pub covariance: [[f64; 3]; 3],
+}
+
+/// Counters of what the filter did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RioCounters {
+    /// IMU samples integrated.
+    pub imu_samples: u64,
+    /// Radar updates applied.
+    pub updates: u64,
+    /// Radar updates rejected by the gate.
+    pub gated: u64,
+    /// Radar measurements older than the filter time (applied late, at the current time).
+    pub late: u64,
+}
+
+/// The filter.
+#[derive(Debug, Clone)]
+pub struct Rio {
+    cfg: RioConfig,
+    mount: RadarMount,
+    nav: Strapdown,
+    p: M15,
+    last_gyro: Vector3<f64>,
+    pending: Vec<VelocityMeasurement>,
+    counters: RioCounters,
+    started: bool,
+}
+
+impl Rio {
+    /// A filter starting from `state` (biases zero) with the radar at `mount`.
+    pub fn new(cfg: RioConfig, mount: RadarMount, state: NavState) -> Rio {
+        let mut p = M15::zeros();
+        let set = |p: &mut M15, at: usize, s: f64| {
+            for k in at..at + 3 {
+                p[(k, k)] = s * s;
+            }
+        };
+        set(&mut p, 0, 1e-6);
+        set(&mut p, 3, cfg.init_velocity_std);
+        set(&mut p, 6, cfg.init_tilt_std);
+        p[(8, 8)] = 1e-6; // yaw: the origin's heading is the reference
+        set(&mut p, 9, cfg.init_accel_bias_std);
+        set(&mut p, 12, cfg.init_gyro_bias_std);
+        Rio {
+            cfg,
+            mount,
+            nav: Strapdown::new(state, cfg.gravity),
+            p,
+            last_gyro: Vector3::zeros(),
+            pending: Vec::new(),
+            counters: RioCounters::default(),
+            started: false,
+        }
+    }
+
+    /// Levels the initial attitude from a stationary accelerometer reading (roll and pitch from
+    /// gravity, yaw 0) and returns the filter.
+    pub fn levelled(cfg: RioConfig, mount: RadarMount, t: f64, accel: [f64; 3]) -> Rio {
+        let f = Vector3::from(accel);
+        let q = UnitQuaternion::rotation_between(&f, &Vector3::z())
+            .unwrap_or_else(UnitQuaternion::identity);
+        // Remove any yaw the shortest rotation introduced.
+        let (r, pch, _) = q.euler_angles();
+        let q = UnitQuaternion::from_euler_angles(r, pch, 0.0);
+        Rio::new(
+            cfg,
+            mount,
+            NavState {
+                q,
+                ..NavState::at_rest(t)
+            },
+        )
+    }
+
+    /// The current state.
+    pub fn state(&self) -> &NavState {
+        self.nav.state()
+    }
+
+    /// Accelerometer bias \[m/s^2\] and gyroscope bias \[rad/s\] estimates.
+    pub fn biases(&self) -> (Vector3<f64>, Vector3<f64>) {
+        (self.nav.accel_bias, self.nav.gyro_bias)
+    }
+
+    /// Error-state covariance (order: p, v, theta, b_a, b_g).
+    pub fn covariance(&self) -> &M15 {
+        &self.p
+    }
+
+    /// Counters.
+    pub fn counters(&self) -> &RioCounters {
+        &self.counters
+    }
+
+    /// Propagates with one IMU sample, then applies any radar measurement now due.
+    pub fn push_imu(&mut self, s: ImuSample) {
+        let before = *self.nav.state();
+        let rejected = self.nav.rejected;
+        self.nav.push(s);
+        self.last_gyro = Vector3::from(s.gyro);
+        if !self.started {
+            self.started = true;
+            return;
+        }
+        if self.nav.rejected != rejected {
+            return;
+        }
+        self.counters.imu_samples += 1;
+        let dt = self.nav.state().t - before.t;
+        self.propagate_cov(&before, &s, dt);
+        let now = self.nav.state().t;
+        let due: Vec<VelocityMeasurement> = self
+            .pending
+            .iter()
+            .filter(|m| m.t <= now)
+            .copied()
+            .collect();
+        self.pending.retain(|m| m.t > now);
+        for m in due {
+            self.update(&m);
+        }
+    }
+
+    /// Queues a radar measurement (applied when the IMU reaches its time; at once if it is
+    /// already past).
+    pub fn push_velocity(&mut self, m: VelocityMeasurement) {
+        if self.started && m.t <= self.nav.state().t {
+            self.counters.late += u64::from(self.nav.state().t - m.t > 0.05);
+            self.update(&m);
+        } else {
+            self.pending.push(m);
+        }
+    }
+
+    fn propagate_cov(&mut self, before: &NavState, s: &ImuSample, dt: f64) {
+        let r = before.q.to_rotation_matrix().into_inner();
+        let f = Vector3::from(s.accel) - self.nav.accel_bias;
+        let w = Vector3::from(s.gyro) - self.nav.gyro_bias;
+        let mut fm = M15::identity();
+        let i3 = Matrix3::identity();
+        fm.fixed_view_mut::<3, 3>(0, 3).copy_from(&(i3 * dt));
+        fm.fixed_view_mut::<3, 3>(3, 6)
+            .copy_from(&(-r * f.cross_matrix() * dt));
+        fm.fixed_view_mut::<3, 3>(3, 9).copy_from(&(-r * dt));
+        fm.fixed_view_mut::<3, 3>(6, 6)
+            .copy_from(&(i3 - w.cross_matrix() * dt));
+        fm.fixed_view_mut::<3, 3>(6, 12).copy_from(&(-i3 * dt));
+        let mut q = M15::zeros();
+        let c = &self.cfg;
+        for (at, density) in [
+            (3, c.accel_noise),
+            (6, c.gyro_noise),
+            (9, c.accel_bias_walk),
+            (12, c.gyro_bias_walk),
+        ] {
+            for k in at..at + 3 {
+                q[(k, k)] = density * density * dt;
+            }
+        }
+        self.p = fm * self.p * fm.transpose() + q;
+        self.p = (self.p + self.p.transpose()) * 0.5;
+    }
+
+    fn update(&mut self, m: &VelocityMeasurement) {
+        let st = *self.nav.state();
+        let r_wb = st.q.to_rotation_matrix().into_inner();
+        let r_br = self.mount.rotation.to_rotation_matrix().into_inner();
+        let t_br = self.mount.translation;
+        let w = self.last_gyro - self.nav.gyro_bias;
+        let v_b = r_wb.transpose() * st.v;
+        let pred = r_br.transpose() * (v_b + w.cross(&t_br));
+        let mut h = M3x15::zeros();
+        h.fixed_view_mut::<3, 3>(0, 3)
+            .copy_from(&(r_br.transpose() * r_wb.transpose()));
+        h.fixed_view_mut::<3, 3>(0, 6)
+            .copy_from(&(r_br.transpose() * v_b.cross_matrix()));
+        h.fixed_view_mut::<3, 3>(0, 12)
+            .copy_from(&(r_br.transpose() * t_br.cross_matrix()));
+        let rm = Matrix3::from_fn(|i, j| m.covariance[i][j]);
+        let y = Vector3::from(m.velocity) - pred;
+        let s = h * self.p * h.transpose() + rm;
+        let Some(si) = s.try_inverse() else {
+            self.counters.gated += 1;
+            return;
+        };
+        let d2 = (y.transpose() * si * y)[(0, 0)];
+        if !(d2.is_finite() && d2 <= self.cfg.gate) {
+            self.counters.gated += 1;
+            return;
+        }
+        let k = self.p * h.transpose() * si;
+        let dx: V15 = k * y;
+        let ikh = M15::identity() - k * h;
+        self.p = ikh * self.p * ikh.transpose() + k * rm * k.transpose();
+        self.p = (self.p + self.p.transpose()) * 0.5;
+        let mut ns = st;
+        ns.p += dx.fixed_rows::<3>(0);
+        ns.v += dx.fixed_rows::<3>(3);
+        ns.q *= UnitQuaternion::from_scaled_axis(dx.fixed_rows::<3>(6).into_owned());
+        self.nav.accel_bias += dx.fixed_rows::<3>(9);
+        self.nav.gyro_bias += dx.fixed_rows::<3>(12);
+        self.nav.set_state(ns);
+        self.counters.updates += 1;
+    }
+}
