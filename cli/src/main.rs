@@ -7,6 +7,7 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+mod eval;
 mod imu;
 mod output;
 mod pose;
@@ -32,6 +33,8 @@ enum Command {
     /// Xsens MTi IMU: dump messages, configure a device.
     #[command(subcommand)]
     Imu(imu::ImuCmd),
+    /// Trajectory error of an estimate against ground truth (ATE, RPE, drift), as evo computes it.
+    Eval(eval::EvalArgs),
     /// Pose link: listen to a pose stream (UDP or serial) and print or save it.
     #[command(subcommand)]
     Pose(pose::PoseCmd),
@@ -46,6 +49,7 @@ fn main() -> ExitCode {
         Command::Radar(cmd) => radar::run(cmd),
         Command::Imu(cmd) => imu::run(cmd),
         Command::Pose(cmd) => pose::run(cmd),
+        Command::Eval(a) => eval::run(a),
         Command::Selftest(a) => selftest::run(a),
     };
     match result {
