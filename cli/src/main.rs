@@ -9,6 +9,7 @@ use std::process::ExitCode;
 
 mod eval;
 mod imu;
+mod odometry;
 mod output;
 mod pose;
 mod radar;
@@ -33,6 +34,8 @@ enum Command {
     /// Xsens MTi IMU: dump messages, configure a device.
     #[command(subcommand)]
     Imu(imu::ImuCmd),
+    /// Classical odometry over a session (Doppler radar-inertial or IMU-only), written as TUM.
+    Odometry(odometry::OdometryArgs),
     /// Trajectory error of an estimate against ground truth (ATE, RPE, drift), as evo computes it.
     Eval(eval::EvalArgs),
     /// Pose link: listen to a pose stream (UDP or serial) and print or save it.
@@ -50,6 +53,7 @@ fn main() -> ExitCode {
         Command::Imu(cmd) => imu::run(cmd),
         Command::Pose(cmd) => pose::run(cmd),
         Command::Eval(a) => eval::run(a),
+        Command::Odometry(a) => odometry::run(a),
         Command::Selftest(a) => selftest::run(a),
     };
     match result {

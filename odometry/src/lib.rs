@@ -12,5 +12,6 @@
 #![warn(missing_docs)]
 
 pub mod ego_velocity;
+pub mod offline;
 pub mod rio;
 pub mod strapdown;

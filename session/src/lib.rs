@@ -20,6 +20,7 @@
 
 mod index;
 mod meta;
+pub mod streams;
 mod tum;
 
 pub use index::{read_index, IndexEntry, IndexWriter, INDEX_MAGIC};

@@ -1,0 +1,256 @@
+//! A session's streams decoded and time-stamped: radar point clouds and IMU samples, each with the
+//! host time of the chunk that completed it (when the session has an index) and its sensor time.
+//! This is what offline runs, dataset export and evaluation read; nothing is dropped silently:
+//! [`StreamReport`] counts what the framers rejected.
+
+use crate::{Session, SessionError, Stream};
+use imu_driver::{Checker, LogFramer, Message, TimeWrap};
+use radar_driver::cfg::RadarConfig;
+use radar_driver::clock::{cpu_clock_hz, CycleUnwrapper};
+use radar_driver::host::PointCloud;
+use radar_driver::{Framer, Poll, DEFAULT_MAX_FRAME};
+
+/// A decoded radar frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RadarFrame {
+    /// Host time of the chunk that completed the frame \[s since session start\], if indexed.
+    pub host_s: Option<f64>,
+    /// Sensor time from the unwrapped cycle counter \[s since the first frame\], if the header has
+    /// one.
+    pub sensor_s: Option<f64>,
+    /// Frame counter.
+    pub frame_number: u32,
+    /// Points, side info, targets.
+    pub cloud: PointCloud,
+}
+
+/// A decoded IMU sample (MTData2 messages with acceleration and rate of turn).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImuSample {
+    /// Host time of the chunk that completed the message \[s since session start\], if indexed.
+    pub host_s: Option<f64>,
+    /// Unwrapped SampleTimeFine \[s\].
+    pub sensor_s: f64,
+    /// Specific force, sensor frame \[m/s^2\].
+    pub accel: [f64; 3],
+    /// Rate of turn, sensor frame \[rad/s\].
+    pub gyro: [f64; 3],
+    /// PacketCounter, if sent.
+    pub packet_counter: Option<u16>,
+}
+
+/// What decoding a stream found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StreamReport {
+    /// Bytes read \[B\].
+    pub bytes: u64,
+    /// Frames or messages decoded.
+    pub ok: u64,
+    /// Frames or messages rejected by the framer.
+    pub bad: u64,
+    /// Bytes not in any good frame \[B\].
+    pub bytes_skipped: u64,
+    /// Messages without the fields a sample needs (config acks, GNSS-only messages, ...).
+    pub not_samples: u64,
+}
+
+/// Decodes the radar stream: frames, point clouds (Doppler indices scaled with the session's .cfg
+/// when it has one), sensor time unwrapped with the .cfg's frame period.
+pub fn radar_frames(session: &Session) -> Result<(Vec<RadarFrame>, StreamReport), SessionError> {
+    let Some(stream) = &session.radar else {
+        return Ok((Vec::new(), StreamReport::default()));
+    };
+    let derived = session
+        .radar_cfg()?
+        .and_then(|text| RadarConfig::parse(&text).ok())
+        .and_then(|c| c.derive(None).ok());
+    let vres = derived.map(|d| d.velocity_resolution_mps as f32);
+    let period_s = derived.map(|d| d.frame_period_ms / 1e3);
+    let bytes = stream.read_all()?;
+    let mut framer: Box<Framer<DEFAULT_MAX_FRAME>> = Box::default();
+    let mut clock: Option<CycleUnwrapper> = None;
+    let mut out = Vec::new();
+    for chunk in stream.chunks() {
+        let host_s = chunk.host_ns.map(|n| n as f64 * 1e-9);
+        let mut input = &bytes[chunk.start as usize..chunk.end as usize];
+        loop {
+            match framer.poll(&mut input) {
+                Poll::Frame(f) => {
+                    let h = *f.header();
+                    let sensor_s = h.time_cpu_cycles.and_then(|c| {
+                        clock
+                            .get_or_insert_with(|| CycleUnwrapper::new(cpu_clock_hz(&h), period_s))
+                            .push(h.frame_number, c)
+                            .seconds
+                    });
+                    out.push(RadarFrame {
+                        host_s,
+                        sensor_s,
+                        frame_number: h.frame_number,
+                        cloud: PointCloud::from_frame(&f, vres),
+                    });
+                }
+                Poll::Dropped { .. } => {}
+                Poll::NeedMore => break,
+            }
+        }
+    }
+    framer.finish();
+    let c = framer.counters();
+    Ok((
+        out,
+        StreamReport {
+            bytes: c.bytes_in,
+            ok: c.frames_ok,
+            bad: c.frames_bad_total(),
+            bytes_skipped: c.bytes_skipped,
+            not_samples: 0,
+        },
+    ))
+}
+
+/// Decodes the IMU stream into samples (messages carrying acceleration, rate of turn and
+/// SampleTimeFine).
+pub fn imu_samples(session: &Session) -> Result<(Vec<ImuSample>, StreamReport), SessionError> {
+    let Some(stream) = &session.imu else {
+        return Ok((Vec::new(), StreamReport::default()));
+    };
+    let wrap = match session
+        .meta
+        .imu
+        .as_ref()
+        .map(|m| m.sample_time_wrap.as_str())
+    {
+        Some("day") => TimeWrap::Day,
+        _ => TimeWrap::Pow32,
+    };
+    decode_imu(stream, wrap)
+}
+
+fn decode_imu(
+    stream: &Stream,
+    wrap: TimeWrap,
+) -> Result<(Vec<ImuSample>, StreamReport), SessionError> {
+    let bytes = stream.read_all()?;
+    let mut framer: Box<LogFramer> = Box::new(LogFramer::new());
+    let mut checker = Checker::new(wrap);
+    let mut out = Vec::new();
+    let mut rep = StreamReport::default();
+    for chunk in stream.chunks() {
+        let host_s = chunk.host_ns.map(|n| n as f64 * 1e-9);
+        let mut input = &bytes[chunk.start as usize..chunk.end as usize];
+        loop {
+            match framer.poll(&mut input) {
+                imu_driver::Poll::Frame(f) => {
+                    let Ok(Message::MtData2(d)) = Message::decode(&f) else {
+                        rep.not_samples += 1;
+                        continue;
+                    };
+                    let s = d.sample();
+                    let checked = checker.check(&s);
+                    match (s.acceleration, s.rate_of_turn, checked.time_ticks) {
+                        (Some(accel), Some(gyro), Some(ticks)) => out.push(ImuSample {
+                            host_s,
+                            sensor_s: ticks as f64 * 1e-4,
+                            accel,
+                            gyro,
+                            packet_counter: s.packet_counter,
+                        }),
+                        _ => rep.not_samples += 1,
+                    }
+                }
+                imu_driver::Poll::Dropped { .. } => {}
+                imu_driver::Poll::NeedMore => break,
+            }
+        }
+    }
+    framer.finish();
+    let c = framer.counters();
+    rep.bytes = c.bytes_in;
+    rep.ok = c.frames_ok;
+    rep.bad = c.frames_bad.checksum + c.frames_bad.length + c.frames_bad.truncated;
+    rep.bytes_skipped = c.bytes_skipped;
+    Ok((out, rep))
+}
+
+/// A linear map from a sensor clock to the host clock, `host = offset + rate * sensor`, fitted to
+/// the lower envelope of (sensor, host) stamps: host stamps carry only positive delays (UART,
+/// USB, scheduling), so the earliest arrivals are the truth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClockFit {
+    /// Host time at sensor time 0 \[s\].
+    pub offset: f64,
+    /// Host seconds per sensor second (1 + drift).
+    pub rate: f64,
+    /// Pairs the fit used.
+    pub used: usize,
+    /// RMS of the kept residuals \[s\].
+    pub residual_rms: f64,
+}
+
+impl ClockFit {
+    /// Fits `host = offset + rate * sensor`; `None` with fewer than 2 pairs or no sensor spread.
+    pub fn fit(pairs: &[(f64, f64)]) -> Option<ClockFit> {
+        let mut keep: Vec<(f64, f64)> = pairs
+            .iter()
+            .copied()
+            .filter(|(s, h)| s.is_finite() && h.is_finite())
+            .collect();
+        let mut fit = None;
+        for _ in 0..4 {
+            let f = least_squares(&keep)?;
+            fit = Some(f);
+            // Keep the lower envelope: residuals at or below the 25th percentile.
+            let mut r: Vec<f64> = keep
+                .iter()
+                .map(|(s, h)| h - (f.offset + f.rate * s))
+                .collect();
+            r.sort_by(f64::total_cmp);
+            let cut = r[r.len() / 4];
+            let next: Vec<(f64, f64)> = keep
+                .iter()
+                .copied()
+                .filter(|(s, h)| h - (f.offset + f.rate * s) <= cut)
+                .collect();
+            if next.len() < 2 || next.len() == keep.len() {
+                break;
+            }
+            keep = next;
+        }
+        fit
+    }
+
+    /// Host time of a sensor time \[s\].
+    pub fn host(&self, sensor_s: f64) -> f64 {
+        self.offset + self.rate * sensor_s
+    }
+}
+
+fn least_squares(p: &[(f64, f64)]) -> Option<ClockFit> {
+    let n = p.len() as f64;
+    if p.len() < 2 {
+        return None;
+    }
+    let (ms, mh) = (
+        p.iter().map(|x| x.0).sum::<f64>() / n,
+        p.iter().map(|x| x.1).sum::<f64>() / n,
+    );
+    let sss: f64 = p.iter().map(|x| (x.0 - ms).powi(2)).sum();
+    if sss <= 0.0 {
+        return None;
+    }
+    let rate = p.iter().map(|x| (x.0 - ms) * (x.1 - mh)).sum::<f64>() / sss;
+    let offset = mh - rate * ms;
+    let rms = (p
+        .iter()
+        .map(|x| (x.1 - offset - rate * x.0).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    Some(ClockFit {
+        offset,
+        rate,
+        used: p.len(),
+        residual_rms: rms,
+    })
+}
