@@ -125,6 +125,11 @@ pub struct Trajectory {
     static_q: UnitQuaternion<f64>,
 }
 
+/// Largest heading change between two control points \[rad\].
+const MAX_TURN: f64 = 1.2;
+/// Headings tried on each side up to [`MAX_TURN`].
+const TURN_STEPS: u32 = 12;
+
 /// Clearance kept from obstacles by the path's control points \[m\].
 pub const CLEARANCE_M: f64 = 0.6;
 
@@ -157,27 +162,37 @@ impl Trajectory {
                 speed = (speed + 0.08 * (vmax - vmin) * rng.normal()).clamp(vmin, vmax);
                 heading += turn_sigma * rng.normal();
                 let step = speed * knot_s;
+                // Prefer the drawn heading, then ever larger turns to either side (at most
+                // MAX_TURN per knot, so the path never reverses on the spot); look ahead so that
+                // turns start early; slow down and accept less clearance in tight spots.
                 let mut next = None;
-                // Prefer the drawn heading, then ever larger turns to either side.
-                for k in 0..=18 {
-                    let dpsi = (k as f64 / 2.0).ceil() * 0.2 * if k % 2 == 0 { 1.0 } else { -1.0 };
-                    let psi = heading + dpsi;
-                    let q = [p[0] + step * psi.cos(), p[1] + step * psi.sin()];
-                    if world.path_free(p, q, CLEARANCE_M) {
-                        heading = psi;
-                        next = Some(q);
-                        break;
+                'search: for (scale, clr, look) in [
+                    (1.0, CLEARANCE_M, 1.0),
+                    (1.0, CLEARANCE_M, 0.0),
+                    (0.5, CLEARANCE_M, 0.0),
+                    (0.5, 0.5 * CLEARANCE_M, 0.0),
+                    (0.25, 0.4 * CLEARANCE_M, 0.0),
+                ] {
+                    for k in 0..=2 * TURN_STEPS {
+                        let side = if k % 2 == 0 { 1.0 } else { -1.0 };
+                        let psi = heading
+                            + side * f64::from(k.div_ceil(2)) * MAX_TURN / f64::from(TURN_STEPS);
+                        let dir = [psi.cos(), psi.sin()];
+                        let reach = step * scale + look;
+                        let far = [p[0] + reach * dir[0], p[1] + reach * dir[1]];
+                        if world.path_free(p, far, clr) {
+                            heading = psi;
+                            next =
+                                Some([p[0] + step * scale * dir[0], p[1] + step * scale * dir[1]]);
+                            break 'search;
+                        }
                     }
                 }
                 let q = next.unwrap_or_else(|| {
-                    // Cornered: turn round on the spot's last free direction (reverse).
-                    heading += PI;
-                    let q = [p[0] + step * heading.cos(), p[1] + step * heading.sin()];
-                    if world.path_free(p, q, CLEARANCE_M * 0.5) {
-                        q
-                    } else {
-                        p
-                    }
+                    // Boxed in: creep while turning (never a full stop, which would make the
+                    // heading undefined).
+                    heading += MAX_TURN;
+                    [p[0] + 0.05 * heading.cos(), p[1] + 0.05 * heading.sin()]
                 });
                 ctrl.push(q);
                 p = q;
