@@ -10,6 +10,7 @@ use std::process::ExitCode;
 mod imu;
 mod output;
 mod radar;
+mod sim;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -30,6 +31,8 @@ enum Command {
     /// Xsens MTi IMU: dump messages, configure a device.
     #[command(subcommand)]
     Imu(imu::ImuCmd),
+    /// Simulate radar-inertial sessions with ground truth; the benchmark split.
+    Sim(sim::SimArgs),
 }
 
 fn main() -> ExitCode {
@@ -37,6 +40,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Radar(cmd) => radar::run(cmd),
         Command::Imu(cmd) => imu::run(cmd),
+        Command::Sim(args) => sim::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
