@@ -174,3 +174,80 @@ fn benchmark(b: &BenchArgs) -> Result<()> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn parse(args: &[&str]) -> std::result::Result<SimArgs, clap::Error> {
+        let mut argv = vec!["milliego", "sim"];
+        argv.extend_from_slice(args);
+        match crate::Cli::try_parse_from(argv)?.command {
+            crate::Command::Sim(a) => Ok(a),
+            other => panic!("parsed as {other:?}"),
+        }
+    }
+
+    #[test]
+    fn bad_input_is_an_error_not_a_panic() {
+        assert!(parse(&["--family", "garage", "-o", "x"]).is_err());
+        assert!(parse(&["--motion", "flying", "-o", "x"]).is_err());
+        assert!(parse(&["benchmark", "--set", "dev", "-o", "x"]).is_err());
+        let e = run(parse(&[]).unwrap()).unwrap_err().to_string();
+        assert!(e.contains("-o DIR"), "{e}");
+        let dir = std::env::temp_dir().join(format!("milliego-sim-cli-{}", std::process::id()));
+        let d = dir.to_str().unwrap();
+        for (args, what) in [
+            (vec!["--radar-hz", "50", "-o", d], "radar frame rate 50 Hz"),
+            (vec!["--duration", "-3", "-o", d], "duration -3 s"),
+            (
+                vec!["--imu-hz", "400", "--imu-baud", "115200", "-o", d],
+                "115200 baud",
+            ),
+        ] {
+            let e = run(parse(&args).unwrap()).unwrap_err().to_string();
+            assert!(e.contains(what), "{args:?}: {e}");
+        }
+        assert!(!dir.exists(), "a refused scenario wrote {d}");
+    }
+
+    #[test]
+    fn simulates_a_session_and_refuses_to_overwrite_it() {
+        let dir = std::env::temp_dir().join(format!("milliego-sim-cli-run-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let d = dir.to_str().unwrap();
+        let args = [
+            "--family",
+            "corridor",
+            "--motion",
+            "robot",
+            "--seed",
+            "3",
+            "--duration",
+            "2",
+            "-o",
+            d,
+        ];
+        run(parse(&args).unwrap()).unwrap();
+        for f in [
+            "radar.bin",
+            "radar.idx",
+            "radar.cfg",
+            "imu.bin",
+            "imu.idx",
+            "groundtruth.tum",
+        ] {
+            assert!(dir.join(f).is_file(), "{f} missing");
+        }
+        let meta = std::fs::read_to_string(dir.join("session.toml")).unwrap();
+        assert!(
+            meta.contains("corridor family, robot motion, seed 3"),
+            "{meta}"
+        );
+        let e = run(parse(&args).unwrap()).unwrap_err().to_string();
+        assert!(e.contains("already exists"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+        assert!(summary_line(&dir, &Summary::default()).contains("0 radar frames"));
+    }
+}
