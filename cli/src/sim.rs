@@ -112,10 +112,9 @@ fn simulate(sc: &Scenario, out: &Path, tag: &str) -> Result<Summary> {
             let _ = write!(err, "\r{tag}simulating {}: {pct:3} %", out.display());
             let _ = err.flush();
         }
-    })
-    .map_err(|e| format!("{}: {e}", out.display()))?;
+    });
     eprintln!();
-    Ok(s)
+    Ok(s?)
 }
 
 fn summary_line(out: &Path, s: &Summary) -> String {
