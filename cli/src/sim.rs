@@ -48,16 +48,16 @@ struct RunArgs {
     /// Seed of the world, the trajectory, the clocks and all noise.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Length [s].
+    /// Length in seconds.
     #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
     duration: f64,
     /// Output session directory (must not hold a session yet).
     #[arg(short = 'o', long = "out")]
     out: Option<PathBuf>,
-    /// Radar frame rate [Hz] (10-30).
+    /// Radar frame rate, 10-30 Hz.
     #[arg(long, default_value_t = 20.0)]
     radar_hz: f64,
-    /// IMU output rate [Hz] (100-400).
+    /// IMU output rate, 100-400 Hz.
     #[arg(long, default_value_t = 200.0)]
     imu_hz: f64,
     /// IMU UART rate [bit/s].
