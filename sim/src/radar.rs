@@ -133,7 +133,7 @@ pub struct RadarModel {
     pub surface_gain_db: f64,
     /// Point-scatterer return scale (SNR of 1 m^2 at 1 m) \[dB\].
     pub point_gain_db: f64,
-    /// Share of outliers in the cloud (the paper: ~75 %).
+    /// Share of outliers in the cloud (the paper: ~75 %; used clamped to 0-0.95).
     pub outlier_share: f64,
     /// Doppler measurement noise before quantisation, 1 σ \[m/s\].
     pub doppler_noise_mps: f64,
@@ -309,7 +309,8 @@ impl RadarModel {
             pts.push(self.report(d * r, v, snr, az, el, PointClass::Inlier, rng));
         }
         // Outliers at the configured share: each inlier brings on average share/(1-share).
-        let per = self.outlier_share / (1.0 - self.outlier_share);
+        let share = self.outlier_share.clamp(0.0, 0.95);
+        let per = share / (1.0 - share);
         let trials = (2.0 * per).ceil() as usize;
         let mut n_out = 0;
         for _ in 0..kept.len() * trials {

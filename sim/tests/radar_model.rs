@@ -134,3 +134,30 @@ fn mirror_ghosts_appear_behind_the_mirror() {
     let share = out as f64 / all as f64;
     assert!((share - 0.75).abs() < 0.06, "outlier share {share}");
 }
+
+#[test]
+fn outlier_share_follows_the_configuration() {
+    let w = World::generate(Family::Office, 4);
+    let mut rng = SimRng::new(2, "share-test");
+    let p = w.free_point(&mut rng, 1.0).unwrap();
+    let p = Vector3::new(p[0], p[1], 1.3);
+    for share in [0.5, 0.75, 0.9] {
+        let mut m = RadarModel::new(20.0).unwrap();
+        m.outlier_share = share;
+        m.min_points = 0;
+        m.max_points = 1000;
+        let (mut all, mut out) = (0, 0);
+        for i in 0..400 {
+            let q = UnitQuaternion::from_euler_angles(0.0, 0.0, f64::from(i) * 0.05);
+            let f = m.frame(&w, &p, &q, &Vector3::new(0.5, 0.0, 0.0), &mut rng);
+            all += f.len();
+            out += f.iter().filter(|p| p.class != PointClass::Inlier).count();
+        }
+        let got = out as f64 / all as f64;
+        assert!(all > 1000, "{all} points");
+        assert!(
+            (got - share).abs() < 0.03,
+            "configured {share}, measured {got}"
+        );
+    }
+}
