@@ -14,6 +14,7 @@ mod output;
 mod pose;
 mod radar;
 mod selftest;
+mod sim;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -44,6 +45,8 @@ enum Command {
     /// Single-threaded self-check of decoders (and, later, the model) with digests that must match
     /// across architectures.
     Selftest(selftest::SelftestArgs),
+    /// Simulate radar-inertial sessions with ground truth; the benchmark split.
+    Sim(sim::SimArgs),
 }
 
 fn main() -> ExitCode {
@@ -55,6 +58,7 @@ fn main() -> ExitCode {
         Command::Eval(a) => eval::run(a),
         Command::Odometry(a) => odometry::run(a),
         Command::Selftest(a) => selftest::run(a),
+        Command::Sim(args) => sim::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,252 @@
+//! `milliego sim ...`: simulate radar-inertial sessions with ground truth, and the benchmark
+//! split.
+//!
+//! ```text
+//! milliego sim --family office --motion handheld --seed 7 --duration 30 -o DIR
+//! milliego sim split
+//! milliego sim benchmark --set test -o DIR
+//! ```
+
+use crate::output;
+use clap::{Args, Subcommand};
+use milliego_sim::motion::MotionKind;
+use milliego_sim::scenario::{self, Scenario, Summary};
+use milliego_sim::split::{self, Set};
+use milliego_sim::world::Family;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
+
+/// `milliego sim`: one session from the options, or a subcommand.
+#[derive(Debug, Args)]
+#[command(args_conflicts_with_subcommands = true)]
+pub struct SimArgs {
+    #[command(subcommand)]
+    cmd: Option<SimCmd>,
+    #[command(flatten)]
+    run: RunArgs,
+}
+
+#[derive(Debug, Subcommand)]
+enum SimCmd {
+    /// Print the benchmark split: which (family, motion, seed) train, validate and test.
+    Split,
+    /// Write every session of one set of the benchmark under DIR/SET/FAMILY-MOTION-SEED.
+    Benchmark(BenchArgs),
+}
+
+#[derive(Debug, Args)]
+struct RunArgs {
+    /// World family: corridor, office, atrium, store_room, household.
+    #[arg(long, default_value = "office", value_parser = parse::<Family>)]
+    family: Family,
+    /// Motion: robot, handheld, headworn, static.
+    #[arg(long, default_value = "handheld", value_parser = parse::<MotionKind>)]
+    motion: MotionKind,
+    /// Seed of the world, the trajectory, the clocks and all noise.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Length in seconds.
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
+    duration: f64,
+    /// Output session directory (must not hold a session yet).
+    #[arg(short = 'o', long = "out")]
+    out: Option<PathBuf>,
+    /// Radar frame rate, 10-30 Hz.
+    #[arg(long, default_value_t = 20.0)]
+    radar_hz: f64,
+    /// IMU output rate, 100-400 Hz.
+    #[arg(long, default_value_t = 200.0)]
+    imu_hz: f64,
+    /// IMU UART rate [bit/s].
+    #[arg(long, default_value_t = 921_600)]
+    imu_baud: u32,
+}
+
+#[derive(Debug, Args)]
+struct BenchArgs {
+    /// Which set: train, val or test.
+    #[arg(long, value_parser = parse::<Set>)]
+    set: Set,
+    /// Root directory of the benchmark.
+    #[arg(short = 'o', long = "out")]
+    out: PathBuf,
+}
+
+fn parse<T: FromStr<Err = String>>(s: &str) -> std::result::Result<T, String> {
+    s.parse()
+}
+
+/// Runs `milliego sim`.
+pub fn run(args: SimArgs) -> Result<()> {
+    match args.cmd {
+        Some(SimCmd::Split) => print_split(),
+        Some(SimCmd::Benchmark(b)) => benchmark(&b),
+        None => {
+            let r = args.run;
+            let out = r
+                .out
+                .ok_or("milliego sim needs an output directory: -o DIR")?;
+            let mut sc = Scenario::new(r.family, r.motion, r.seed);
+            sc.duration_s = r.duration;
+            sc.radar_hz = r.radar_hz;
+            sc.imu_hz = r.imu_hz;
+            sc.imu_baud = r.imu_baud;
+            let s = simulate(&sc, &out, "")?;
+            println!("{}", summary_line(&out, &s));
+            Ok(())
+        }
+    }
+}
+
+fn simulate(sc: &Scenario, out: &Path, tag: &str) -> Result<Summary> {
+    sc.validate()?;
+    let mut last = -1;
+    let mut err = std::io::stderr();
+    let s = scenario::run(sc, out, &mut |f| {
+        let pct = (f * 100.0) as i32;
+        if pct / 5 != last / 5 {
+            last = pct;
+            let _ = write!(err, "\r{tag}simulating {}: {pct:3} %", out.display());
+            let _ = err.flush();
+        }
+    });
+    eprintln!();
+    Ok(s?)
+}
+
+fn summary_line(out: &Path, s: &Summary) -> String {
+    format!(
+        "{}: {} radar frames, {:.1} points per frame ({}..{}), outlier share {:.3}, {} IMU samples, {} + {} B",
+        out.display(),
+        s.frames,
+        s.points_mean(),
+        s.points_min,
+        s.points_max,
+        s.outlier_share(),
+        s.imu_samples,
+        s.radar_bytes,
+        s.imu_bytes
+    )
+}
+
+fn print_split() -> Result<()> {
+    let mut out = output::stdout();
+    let mut lines = vec![
+        "# milliEgo simulator benchmark split (docs/simulator.md)".to_string(),
+        format!(
+            "# held-out family: {}; train seeds {:?}, val seeds {:?}, test seeds {:?}; {} s each",
+            split::HELD_OUT_FAMILY,
+            split::TRAIN_SEEDS,
+            split::VAL_SEEDS,
+            split::TEST_SEEDS,
+            split::DURATION_S
+        ),
+        "set,family,motion,seed,duration_s".to_string(),
+    ];
+    lines.extend(split::benchmark().iter().map(|e| {
+        format!(
+            "{},{},{},{},{}",
+            e.set, e.family, e.motion, e.seed, e.duration_s
+        )
+    }));
+    for l in &lines {
+        if !output::line(&mut out, l)? {
+            return Ok(());
+        }
+    }
+    match out.flush() {
+        Err(e) if output::is_broken_pipe(&e) => Ok(()),
+        r => Ok(r?),
+    }
+}
+
+fn benchmark(b: &BenchArgs) -> Result<()> {
+    let entries = split::entries(b.set);
+    let n = entries.len();
+    for (i, e) in entries.iter().enumerate() {
+        let out = b.out.join(e.dir_name());
+        let s = simulate(&e.scenario(), &out, &format!("[{}/{n}] ", i + 1))?;
+        println!("{}", summary_line(&out, &s));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn parse(args: &[&str]) -> std::result::Result<SimArgs, clap::Error> {
+        let mut argv = vec!["milliego", "sim"];
+        argv.extend_from_slice(args);
+        match crate::Cli::try_parse_from(argv)?.command {
+            crate::Command::Sim(a) => Ok(a),
+            other => panic!("parsed as {other:?}"),
+        }
+    }
+
+    #[test]
+    fn bad_input_is_an_error_not_a_panic() {
+        assert!(parse(&["--family", "garage", "-o", "x"]).is_err());
+        assert!(parse(&["--motion", "flying", "-o", "x"]).is_err());
+        assert!(parse(&["benchmark", "--set", "dev", "-o", "x"]).is_err());
+        let e = run(parse(&[]).unwrap()).unwrap_err().to_string();
+        assert!(e.contains("-o DIR"), "{e}");
+        let dir = std::env::temp_dir().join(format!("milliego-sim-cli-{}", std::process::id()));
+        let d = dir.to_str().unwrap();
+        for (args, what) in [
+            (vec!["--radar-hz", "50", "-o", d], "radar frame rate 50 Hz"),
+            (vec!["--duration", "-3", "-o", d], "duration -3 s"),
+            (
+                vec!["--imu-hz", "400", "--imu-baud", "115200", "-o", d],
+                "115200 baud",
+            ),
+        ] {
+            let e = run(parse(&args).unwrap()).unwrap_err().to_string();
+            assert!(e.contains(what), "{args:?}: {e}");
+        }
+        assert!(!dir.exists(), "a refused scenario wrote {d}");
+    }
+
+    #[test]
+    fn simulates_a_session_and_refuses_to_overwrite_it() {
+        let dir = std::env::temp_dir().join(format!("milliego-sim-cli-run-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let d = dir.to_str().unwrap();
+        let args = [
+            "--family",
+            "corridor",
+            "--motion",
+            "robot",
+            "--seed",
+            "3",
+            "--duration",
+            "2",
+            "-o",
+            d,
+        ];
+        run(parse(&args).unwrap()).unwrap();
+        for f in [
+            "radar.bin",
+            "radar.idx",
+            "radar.cfg",
+            "imu.bin",
+            "imu.idx",
+            "groundtruth.tum",
+        ] {
+            assert!(dir.join(f).is_file(), "{f} missing");
+        }
+        let meta = std::fs::read_to_string(dir.join("session.toml")).unwrap();
+        assert!(
+            meta.contains("corridor family, robot motion, seed 3"),
+            "{meta}"
+        );
+        let e = run(parse(&args).unwrap()).unwrap_err().to_string();
+        assert!(e.contains("already exists"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+        assert!(summary_line(&dir, &Summary::default()).contains("0 radar frames"));
+    }
+}

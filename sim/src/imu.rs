@@ -1,0 +1,248 @@
+//! The IMU model: an MTi-1-like accelerometer and gyroscope, and its MTData2 byte stream.
+//!
+//! Each axis measures the truth plus white noise, a bias that wanders as a first-order
+//! Gauss-Markov process (the datasheet's in-run bias stability), a bias random walk, and a
+//! constant turn-on bias. The accelerometer measures specific force (acceleration minus
+//! gravity) at the IMU's own origin, in the IMU frame; the gyroscope the IMU frame's angular
+//! velocity.
+
+use crate::rng::SimRng;
+use imu_driver::{DataId, MtData2Writer, Value, BID_MASTER};
+use nalgebra::Vector3;
+
+/// Standard gravity used for the world \[m/s^2\] (world z up: g = (0, 0, −9.81)).
+pub const GRAVITY: f64 = 9.81;
+
+/// PacketCounter data id.
+pub const ID_PACKET_COUNTER: DataId = DataId(0x1020);
+/// SampleTimeFine data id (10 kHz ticks).
+pub const ID_SAMPLE_TIME_FINE: DataId = DataId(0x1060);
+/// Acceleration, Float32.
+pub const ID_ACCELERATION: DataId = DataId(0x4020);
+/// RateOfTurn, Float32.
+pub const ID_RATE_OF_TURN: DataId = DataId(0x8020);
+/// StatusWord.
+pub const ID_STATUS_WORD: DataId = DataId(0xE020);
+/// StatusWord sent with every sample: bit 0, self test passed.
+pub const STATUS_WORD: u32 = 0x0000_0001;
+
+/// Noise of one sensor triad (same on all three axes).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseSpec {
+    /// White noise density \[unit/√Hz\] (unit: rad/s for the gyro, m/s^2 for the accelerometer).
+    pub white: f64,
+    /// Bias instability: standard deviation of the Gauss-Markov bias \[unit\].
+    pub bias_sigma: f64,
+    /// Correlation time of the Gauss-Markov bias \[s\].
+    pub bias_tau_s: f64,
+    /// Bias random walk \[unit/√s\] (unit·√Hz).
+    pub random_walk: f64,
+    /// Turn-on bias, 1 σ \[unit\] (constant over a session).
+    pub turn_on: f64,
+}
+
+impl NoiseSpec {
+    /// The Allan deviation these parameters give at averaging time `tau` \[s\] \[unit\]: white
+    /// noise N²/τ, the Gauss-Markov bias (IEEE Std 952 form) and the random walk K²τ/3.
+    pub fn allan_deviation(&self, tau: f64) -> f64 {
+        let white = self.white * self.white / tau;
+        let rw = self.random_walk * self.random_walk * tau / 3.0;
+        let t = self.bias_tau_s;
+        let qc = 2.0 * self.bias_sigma * self.bias_sigma / t;
+        let x = tau / t;
+        let gm = qc * t * t / tau * (1.0 - (3.0 - 4.0 * (-x).exp() + (-2.0 * x).exp()) / (2.0 * x));
+        (white + rw + gm).sqrt()
+    }
+}
+
+/// The IMU's noise: gyroscope and accelerometer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImuSpec {
+    /// Gyroscope \[rad/s\].
+    pub gyro: NoiseSpec,
+    /// Accelerometer \[m/s^2\].
+    pub accel: NoiseSpec,
+}
+
+impl ImuSpec {
+    /// MTi-1 series datasheet figures: gyro 0.007 °/s/√Hz, 10 °/h in-run bias stability;
+    /// accelerometer 120 µg/√Hz, 0.03 mg (30 µg) in-run bias stability. Random walks and turn-on
+    /// biases are assumptions (see docs/simulator.md).
+    pub fn mti1() -> ImuSpec {
+        let deg = std::f64::consts::PI / 180.0;
+        let ug = GRAVITY * 1e-6;
+        ImuSpec {
+            gyro: NoiseSpec {
+                white: 0.007 * deg,
+                bias_sigma: 10.0 / 3600.0 * deg,
+                bias_tau_s: 100.0,
+                random_walk: 2e-5 * deg,
+                turn_on: 0.05 * deg,
+            },
+            accel: NoiseSpec {
+                white: 120.0 * ug,
+                bias_sigma: 30.0 * ug,
+                bias_tau_s: 100.0,
+                random_walk: 2.0 * ug,
+                turn_on: 2000.0 * ug,
+            },
+        }
+    }
+}
+
+/// The evolving errors of one triad.
+#[derive(Debug, Clone)]
+struct TriadState {
+    spec: NoiseSpec,
+    turn_on: Vector3<f64>,
+    gm: Vector3<f64>,
+    rw: Vector3<f64>,
+}
+
+impl TriadState {
+    fn new(spec: NoiseSpec, rng: &mut SimRng) -> TriadState {
+        let mut v = |s: f64| Vector3::new(s * rng.normal(), s * rng.normal(), s * rng.normal());
+        TriadState {
+            spec,
+            turn_on: v(spec.turn_on),
+            gm: v(spec.bias_sigma),
+            rw: Vector3::zeros(),
+        }
+    }
+
+    /// The bias now, then steps the bias processes by `dt` \[s\].
+    fn measure(&mut self, truth: Vector3<f64>, dt: f64, rng: &mut SimRng) -> Vector3<f64> {
+        let s = self.spec;
+        let white = s.white / dt.sqrt();
+        let out = truth
+            + self.turn_on
+            + self.gm
+            + self.rw
+            + Vector3::new(rng.normal(), rng.normal(), rng.normal()) * white;
+        let phi = (-dt / s.bias_tau_s).exp();
+        let gm_step = s.bias_sigma * (1.0 - phi * phi).sqrt();
+        let rw_step = s.random_walk * dt.sqrt();
+        for k in 0..3 {
+            self.gm[k] = phi * self.gm[k] + gm_step * rng.normal();
+            self.rw[k] += rw_step * rng.normal();
+        }
+        out
+    }
+
+    fn bias(&self) -> Vector3<f64> {
+        self.turn_on + self.gm + self.rw
+    }
+}
+
+/// An IMU: noise processes for both triads.
+#[derive(Debug, Clone)]
+pub struct Imu {
+    gyro: TriadState,
+    accel: TriadState,
+    rng: SimRng,
+}
+
+/// One measured sample and the truth behind it (IMU frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImuSample {
+    /// Measured specific force \[m/s^2\].
+    pub accel: Vector3<f64>,
+    /// Measured angular velocity \[rad/s\].
+    pub gyro: Vector3<f64>,
+    /// Accelerometer bias at this sample \[m/s^2\].
+    pub accel_bias: Vector3<f64>,
+    /// Gyroscope bias at this sample \[rad/s\].
+    pub gyro_bias: Vector3<f64>,
+}
+
+impl Imu {
+    /// An IMU with `spec`, its biases drawn from `rng`.
+    pub fn new(spec: ImuSpec, mut rng: SimRng) -> Imu {
+        Imu {
+            gyro: TriadState::new(spec.gyro, &mut rng),
+            accel: TriadState::new(spec.accel, &mut rng),
+            rng,
+        }
+    }
+
+    /// Measures true specific force `f` \[m/s^2\] and rate `w` \[rad/s\]; `dt` is the sample
+    /// interval \[s\].
+    pub fn sample(&mut self, f: Vector3<f64>, w: Vector3<f64>, dt: f64) -> ImuSample {
+        let (accel_bias, gyro_bias) = (self.accel.bias(), self.gyro.bias());
+        let accel = self.accel.measure(f, dt, &mut self.rng);
+        let gyro = self.gyro.measure(w, dt, &mut self.rng);
+        ImuSample {
+            accel,
+            gyro,
+            accel_bias,
+            gyro_bias,
+        }
+    }
+}
+
+/// Encodes one MTData2 message: PacketCounter, SampleTimeFine, Acceleration, RateOfTurn,
+/// StatusWord (Float32, the MTi-1's default precision).
+pub fn encode(counter: u16, sample_time_fine: u32, s: &ImuSample) -> Vec<u8> {
+    let mut buf = [0u8; 128];
+    let mut w = MtData2Writer::new(&mut buf);
+    let items = [
+        (ID_PACKET_COUNTER, Value::PacketCounter(counter)),
+        (ID_SAMPLE_TIME_FINE, Value::SampleTimeFine(sample_time_fine)),
+        (
+            ID_ACCELERATION,
+            Value::Acceleration([s.accel.x, s.accel.y, s.accel.z]),
+        ),
+        (
+            ID_RATE_OF_TURN,
+            Value::RateOfTurn([s.gyro.x, s.gyro.y, s.gyro.z]),
+        ),
+        (ID_STATUS_WORD, Value::StatusWord(STATUS_WORD)),
+    ];
+    for (id, v) in &items {
+        // The buffer holds all five items (60 B of payload): these cannot fail.
+        let _ = w.value(*id, v);
+    }
+    let n = w.finish(BID_MASTER).unwrap_or(0);
+    buf[..n].to_vec()
+}
+
+/// Bytes of one encoded message \[B\].
+pub const MESSAGE_LEN: usize = 4 + (3 + 2) + (3 + 4) + (3 + 12) + (3 + 12) + (3 + 4) + 1;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn message_has_the_documented_length_and_decodes() {
+        let s = ImuSample {
+            accel: Vector3::new(0.1, 0.2, 9.8),
+            gyro: Vector3::new(0.01, -0.02, 0.03),
+            accel_bias: Vector3::zeros(),
+            gyro_bias: Vector3::zeros(),
+        };
+        let m = encode(65535, 123_456, &s);
+        assert_eq!(m.len(), MESSAGE_LEN);
+        let mut f = imu_driver::DeviceFramer::new();
+        let mut input = &m[..];
+        let imu_driver::Poll::Frame(frame) = f.poll(&mut input) else {
+            panic!("no frame")
+        };
+        let Ok(imu_driver::Message::MtData2(d)) = imu_driver::Message::decode(&frame) else {
+            panic!("not MTData2")
+        };
+        let smp = d.sample();
+        assert_eq!(smp.packet_counter, Some(65535));
+        assert_eq!(smp.sample_time_fine, Some(123_456));
+        assert!((smp.acceleration.unwrap()[2] - 9.8).abs() < 1e-5);
+    }
+
+    #[test]
+    fn allan_formula_limits() {
+        let g = ImuSpec::mti1().gyro;
+        // Short tau: white noise dominates.
+        assert!((g.allan_deviation(0.01) / (g.white / 0.1) - 1.0).abs() < 0.01);
+        // Around the correlation time the Gauss-Markov bias shows up.
+        assert!(g.allan_deviation(200.0) > g.white / 200f64.sqrt() * 1.5);
+    }
+}

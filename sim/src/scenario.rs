@@ -1,0 +1,373 @@
+//! A scenario end to end: world, motion, sensors, clocks, links, written as a session.
+//!
+//! Radar: frame k starts at radar time `s0 + k T` (T from the .cfg), its chirps take the active
+//! time, the points are computed at the middle of the chirps, the frame is ready after the
+//! processing delay (with jitter) and its header carries the 200 MHz timeCpuCycles of that moment;
+//! then it goes out on the 921600-baud UART. IMU: sample k at IMU time `s0 + k / f`, out on its
+//! UART 1 ms later. Host read chunks are timed when their last byte arrived plus the USB latency.
+
+use crate::clock::{SensorClock, Uart};
+use crate::imu::{self, Imu, ImuSpec, GRAVITY};
+use crate::motion::{MotionKind, Trajectory};
+use crate::radar::{PointClass, RadarModel, CPU_HZ};
+use crate::rng::SimRng;
+use crate::world::{Family, World};
+use crate::SimError;
+use milliego_session::{
+    ClockTruth, Extrinsic, Extrinsics, ImuMeta, Meta, RadarMeta, SessionWriter, Source, StreamKind,
+    TumPose,
+};
+use nalgebra::{UnitQuaternion, Vector3};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// Host time of the first radar frame's start \[s\].
+pub const RADAR_START_S: f64 = 0.2;
+/// Host time of the first IMU sample \[s\].
+pub const IMU_START_S: f64 = 0.05;
+/// Ground-truth rate \[Hz\].
+pub const GT_HZ: f64 = 200.0;
+/// Ground truth runs this long past the scenario's duration \[s\] (covers the last frames'
+/// transmission).
+pub const GT_TAIL_S: f64 = 0.5;
+/// Radar processing delay after the chirps: base \[s\].
+pub const RADAR_PROC_S: f64 = 3e-3;
+/// Radar processing delay per point \[s\].
+pub const RADAR_PROC_PER_POINT_S: f64 = 15e-6;
+/// Radar processing jitter: uniform in \[0, this) \[s\].
+pub const RADAR_JITTER_S: f64 = 1.5e-3;
+/// IMU output latency after the sample instant \[s\].
+pub const IMU_LATENCY_S: f64 = 1e-3;
+/// Ground-truth file of the radar points' causes, beside the session files.
+pub const RADAR_TRUTH_FILE: &str = "radar_truth.csv";
+/// Ground-truth file of the IMU biases.
+pub const IMU_TRUTH_FILE: &str = "imu_truth.csv";
+
+/// What to simulate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scenario {
+    /// World family.
+    pub family: Family,
+    /// Motion kind.
+    pub motion: MotionKind,
+    /// Seed of the world, the trajectory, the clocks and all noise.
+    pub seed: u64,
+    /// Length \[s\].
+    pub duration_s: f64,
+    /// Radar frame rate \[Hz\] (10-30).
+    pub radar_hz: f64,
+    /// IMU output rate \[Hz\] (100-400).
+    pub imu_hz: f64,
+    /// IMU UART rate \[bit/s\].
+    pub imu_baud: u32,
+    /// IMU noise.
+    pub imu_spec: ImuSpec,
+}
+
+impl Scenario {
+    /// Defaults: 30 s, radar 20 Hz, IMU 200 Hz at 921600 baud, MTi-1 noise.
+    pub fn new(family: Family, motion: MotionKind, seed: u64) -> Scenario {
+        Scenario {
+            family,
+            motion,
+            seed,
+            duration_s: 30.0,
+            radar_hz: 20.0,
+            imu_hz: 200.0,
+            imu_baud: 921_600,
+            imu_spec: ImuSpec::mti1(),
+        }
+    }
+
+    /// Checks the settings, naming the first one out of range.
+    pub fn validate(&self) -> Result<(), SimError> {
+        let bad = |m: String| Err(SimError::Config(m));
+        if !(self.duration_s.is_finite() && self.duration_s >= 1.0 && self.duration_s <= 3600.0) {
+            return bad(format!(
+                "duration {} s is outside 1-3600 s",
+                self.duration_s
+            ));
+        }
+        if !(100.0..=400.0).contains(&self.imu_hz) {
+            return bad(format!("IMU rate {} Hz is outside 100-400 Hz", self.imu_hz));
+        }
+        let need = imu::MESSAGE_LEN as f64 * 10.0 * self.imu_hz;
+        if need > 0.9 * f64::from(self.imu_baud) {
+            return bad(format!(
+                "IMU at {} Hz needs {need:.0} bit/s, more than 90 % of {} baud",
+                self.imu_hz, self.imu_baud
+            ));
+        }
+        RadarModel::new(self.radar_hz).map(|_| ())
+    }
+
+    /// One line saying what this is.
+    pub fn description(&self) -> String {
+        format!(
+            "milliego sim {}: {} family, {} motion, seed {}, {} s; radar {} Hz, IMU {} Hz",
+            env!("CARGO_PKG_VERSION"),
+            self.family,
+            self.motion,
+            self.seed,
+            self.duration_s,
+            self.radar_hz,
+            self.imu_hz
+        )
+    }
+}
+
+/// Sensor poses on the body for a motion kind: (radar, IMU), each `p_body = R p_sensor + t`.
+///
+/// The radar looks along the body's x axis (radar y = body x, radar x = body −y). The IMU sits
+/// beside it, rotated and offset as on the paper's rigs (a board mounted at 90° with a tilt).
+pub fn extrinsics(motion: MotionKind) -> Extrinsics {
+    let radar_q = UnitQuaternion::from_euler_angles(0.0, 0.0, -std::f64::consts::FRAC_PI_2);
+    let imu_q = UnitQuaternion::from_euler_angles(0.02, -0.03, std::f64::consts::FRAC_PI_2 + 0.01);
+    let (rt, it) = match motion {
+        MotionKind::Robot => ([0.10, 0.0, 0.05], [-0.05, 0.04, -0.02]),
+        _ => ([0.04, 0.0, 0.02], [-0.02, 0.03, -0.01]),
+    };
+    let ext = |t: [f64; 3], q: UnitQuaternion<f64>| Extrinsic {
+        translation_m: t,
+        rotation_wxyz: [q.w, q.i, q.j, q.k],
+    };
+    Extrinsics {
+        radar: ext(rt, radar_q),
+        imu: ext(it, imu_q),
+    }
+}
+
+/// A sensor pose on the body as (translation, rotation).
+pub fn sensor_pose(e: &Extrinsic) -> (Vector3<f64>, UnitQuaternion<f64>) {
+    let [w, x, y, z] = e.rotation_wxyz;
+    (
+        Vector3::from(e.translation_m),
+        UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z)),
+    )
+}
+
+/// What a simulation produced.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Summary {
+    /// Radar frames.
+    pub frames: u64,
+    /// Points over all frames.
+    pub points: u64,
+    /// Outlier points (mirror, multipath, clutter) over all frames.
+    pub outliers: u64,
+    /// Fewest points in a frame.
+    pub points_min: u64,
+    /// Most points in a frame.
+    pub points_max: u64,
+    /// IMU samples.
+    pub imu_samples: u64,
+    /// Radar stream bytes \[B\].
+    pub radar_bytes: u64,
+    /// IMU stream bytes \[B\].
+    pub imu_bytes: u64,
+}
+
+impl Summary {
+    /// Mean points per frame.
+    pub fn points_mean(&self) -> f64 {
+        self.points as f64 / (self.frames.max(1)) as f64
+    }
+    /// Share of outliers among all points.
+    pub fn outlier_share(&self) -> f64 {
+        self.outliers as f64 / (self.points.max(1)) as f64
+    }
+}
+
+/// The clocks of a scenario: (radar, IMU), drawn from its seed.
+pub fn clocks(seed: u64) -> (SensorClock, SensorClock) {
+    let mut rng = SimRng::new(seed, "clocks");
+    (
+        SensorClock::random(&mut rng, 1.0, 20.0, 30.0),
+        SensorClock::random(&mut rng, 1.0, 500.0, 50.0),
+    )
+}
+
+/// Simulates `sc` into a new session directory `dir`; `progress` gets the fraction done.
+pub fn run(sc: &Scenario, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<Summary, SimError> {
+    sc.validate()?;
+    let world = World::generate(sc.family, sc.seed);
+    let traj = Trajectory::generate(sc.motion, &world, sc.seed, sc.duration_s + GT_TAIL_S)?;
+    let model = RadarModel::new(sc.radar_hz)?;
+    let ext = extrinsics(sc.motion);
+    let (t_br, q_br) = sensor_pose(&ext.radar);
+    let (t_bi, q_bi) = sensor_pose(&ext.imu);
+    let (rclk, iclk) = clocks(sc.seed);
+
+    let mut meta = Meta::new(Source::Simulated);
+    meta.description = sc.description();
+    meta.radar = Some(RadarMeta {
+        baud: model.derived.data_baud,
+        device: Some("AWR1843 (simulated, mmWave SDK 3.5 out-of-box demo)".into()),
+        ..RadarMeta::default()
+    });
+    meta.imu = Some(ImuMeta {
+        baud: sc.imu_baud,
+        device: Some("MTi-1 (simulated)".into()),
+        sample_time_wrap: "u32".into(),
+        rate_hz: Some(sc.imu_hz),
+        ..ImuMeta::default()
+    });
+    meta.extrinsics = ext;
+    meta.clock = Some(ClockTruth {
+        radar_offset_s: rclk.offset_s,
+        radar_drift_ppm: rclk.drift_ppm,
+        imu_offset_s: iclk.offset_s,
+        imu_drift_ppm: iclk.drift_ppm,
+    });
+    let mut w = SessionWriter::create(dir, meta)?;
+    w.radar_cfg(&model.cfg)?;
+    let mut sum = Summary {
+        points_min: u64::MAX,
+        ..Summary::default()
+    };
+
+    // Radar.
+    let mut rs = w.stream(StreamKind::Radar)?;
+    let mut rng = SimRng::new(sc.seed, "radar");
+    let mut link_rng = SimRng::new(sc.seed, "radar/link");
+    let mut uart = Uart::new(model.derived.data_baud, (64, 1024), (0.2e-3, 1.5e-3));
+    let mut truth = String::from(
+        "# frame,index,class,true_x,true_y,true_z,true_v,x,y,z,v\n# radar frame [m], radial velocity [m/s]\n",
+    );
+    let period = model.frame_period_s();
+    let s0 = rclk.to_sensor(RADAR_START_S);
+    let mut prev_tx_us = 0u32;
+    for k in 0u64.. {
+        let start = s0 + k as f64 * period;
+        if rclk.to_host(start) >= sc.duration_s {
+            break;
+        }
+        let mid = rclk.to_host(start + 0.5 * model.active_time_s());
+        let body = traj.pose(mid);
+        let rp = body.compose(&t_br, &q_br);
+        let v = traj.point_velocity(mid, &t_br);
+        let pts = model.frame(&world, &rp.p, &rp.q, &v, &mut rng);
+        let proc = RADAR_PROC_S
+            + RADAR_PROC_PER_POINT_S * pts.len() as f64
+            + link_rng.uniform(0.0, RADAR_JITTER_S);
+        let ready = start + model.active_time_s() + proc;
+        let cycles = ((ready * CPU_HZ).floor() as u64 % (1u64 << 32)) as u32;
+        let margin = ((period - model.active_time_s() - proc) * 1e6).max(0.0);
+        let stats = [
+            (proc * 1e6) as u32,
+            prev_tx_us,
+            margin as u32,
+            20,
+            (model.active_time_s() / period * 100.0) as u32,
+            (proc / period * 100.0) as u32,
+        ];
+        let frame_number = (k + 1) as u32;
+        let bytes = model.encode(frame_number, cycles, &pts, stats, &mut link_rng);
+        prev_tx_us = (bytes.len() as f64 * uart.byte_time() * 1e6) as u32;
+        let (_, reads) = uart.send(rclk.to_host(ready), bytes.len(), &mut link_rng);
+        let mut at = 0;
+        for r in reads {
+            rs.write_chunk(r.host_ns, &bytes[at..at + r.len])?;
+            at += r.len;
+        }
+        for (i, p) in pts.iter().enumerate() {
+            let _ = writeln!(
+                truth,
+                "{frame_number},{i},{},{:.6},{:.6},{:.6},{:.6},{},{},{},{}",
+                p.class.name(),
+                p.true_xyz.x,
+                p.true_xyz.y,
+                p.true_xyz.z,
+                p.true_v,
+                p.xyz[0],
+                p.xyz[1],
+                p.xyz[2],
+                p.v
+            );
+        }
+        let n = pts.len() as u64;
+        sum.frames += 1;
+        sum.points += n;
+        sum.outliers += pts.iter().filter(|p| p.class != PointClass::Inlier).count() as u64;
+        sum.points_min = sum.points_min.min(n);
+        sum.points_max = sum.points_max.max(n);
+        if k % 20 == 0 {
+            progress(0.8 * (rclk.to_host(start) / sc.duration_s).min(1.0));
+        }
+    }
+    sum.radar_bytes = rs.finish()?;
+    write_file(dir, RADAR_TRUTH_FILE, &truth)?;
+
+    // IMU.
+    let mut is = w.stream(StreamKind::Imu)?;
+    let mut dev = Imu::new(sc.imu_spec, SimRng::new(sc.seed, "imu"));
+    let mut link_rng = SimRng::new(sc.seed, "imu/link");
+    let mut uart = Uart::new(sc.imu_baud, (8, 64), (0.1e-3, 1.0e-3));
+    let mut itruth =
+        String::from("# t_host[s],accel_bias_x,y,z[m/s^2],gyro_bias_x,y,z[rad/s] (IMU frame)\n");
+    let dt = 1.0 / sc.imu_hz;
+    let s0 = iclk.to_sensor(IMU_START_S);
+    let g = Vector3::new(0.0, 0.0, -GRAVITY);
+    for k in 0u64.. {
+        let ts = s0 + k as f64 * dt;
+        let th = iclk.to_host(ts);
+        if th >= sc.duration_s {
+            break;
+        }
+        let q_wi = traj.pose(th).q * q_bi;
+        let a = traj.point_acceleration(th, &t_bi);
+        let f = q_wi.inverse() * (a - g);
+        let wv = traj.angular_velocity(th, &q_bi);
+        let s = dev.sample(f, wv, dt);
+        let stf = ((ts * 1e4).round() as u64 % (1u64 << 32)) as u32;
+        let bytes = imu::encode(k as u16, stf, &s);
+        let (_, reads) = uart.send(th + IMU_LATENCY_S, bytes.len(), &mut link_rng);
+        let mut at = 0;
+        for r in reads {
+            is.write_chunk(r.host_ns, &bytes[at..at + r.len])?;
+            at += r.len;
+        }
+        let _ = writeln!(
+            itruth,
+            "{th:.9},{},{},{},{},{},{}",
+            s.accel_bias.x,
+            s.accel_bias.y,
+            s.accel_bias.z,
+            s.gyro_bias.x,
+            s.gyro_bias.y,
+            s.gyro_bias.z
+        );
+        sum.imu_samples += 1;
+        if k % 2000 == 0 {
+            progress(0.8 + 0.15 * (th / sc.duration_s).min(1.0));
+        }
+    }
+    sum.imu_bytes = is.finish()?;
+    write_file(dir, IMU_TRUTH_FILE, &itruth)?;
+
+    // Ground truth.
+    let n = ((sc.duration_s + GT_TAIL_S) * GT_HZ).floor() as usize;
+    let poses: Vec<TumPose> = (0..=n)
+        .map(|i| {
+            let t = i as f64 / GT_HZ;
+            let p = traj.pose(t);
+            TumPose {
+                t,
+                p: [p.p.x, p.p.y, p.p.z],
+                q: [p.q.i, p.q.j, p.q.k, p.q.w],
+            }
+        })
+        .collect();
+    w.groundtruth(&poses)?;
+    w.finish()?;
+    if sum.frames == 0 {
+        sum.points_min = 0;
+    }
+    progress(1.0);
+    Ok(sum)
+}
+
+fn write_file(dir: &Path, name: &str, text: &str) -> Result<(), SimError> {
+    let p = dir.join(name);
+    std::fs::write(&p, text).map_err(|e| SimError::Io(format!("{}: {e}", p.display())))
+}
