@@ -77,6 +77,17 @@ impl Default for Config {
     }
 }
 
+/// A velocity the estimate should agree with (radar frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Prior {
+    /// Velocity \[m/s\].
+    pub velocity: [f64; 3],
+    /// Its covariance \[m^2/s^2\].
+    pub covariance: [[f64; 3]; 3],
+    /// Chi-square gate a hypothesis must pass (3 dof; 16.27 = 99.9%).
+    pub gate: f64,
+}
+
 /// Why no (or only a partial) estimate is available.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Status {
@@ -162,6 +173,16 @@ impl EgoVelocityEstimator {
 
     /// Estimates the sensor velocity from one frame.
     pub fn estimate(&mut self, detections: &[Detection]) -> Estimate {
+        self.estimate_guided(detections, None)
+    }
+
+    /// Estimates the sensor velocity from one frame, choosing the consensus among hypotheses that
+    /// agree with `prior` (velocity \[m/s\] and its covariance, e.g. the filter's prediction):
+    /// moving objects and mirror ghosts can form a larger coherent set than the static world in a
+    /// sparse frame, and the prior tells them apart. The prior only selects the inlier set; the
+    /// returned velocity and covariance come from the radar points alone, so a filter can fuse
+    /// them without counting its own prediction twice.
+    pub fn estimate_guided(&mut self, detections: &[Detection], prior: Option<Prior>) -> Estimate {
         let cfg = self.cfg;
         self.dirs.clear();
         self.vr.clear();
@@ -218,6 +239,26 @@ impl EgoVelocityEstimator {
         let thresh = f64::from(cfg.inlier_sigmas * cfg.sigma);
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
         let mut best: Option<(usize, f64, Vector3<f64>)> = None;
+        // A hypothesis from a minimal sample is itself uncertain by about the inlier threshold.
+        let prior = prior.and_then(|p| {
+            let c = Matrix3::from_fn(|r, k| p.covariance[r][k])
+                + Matrix3::identity() * (thresh * thresh);
+            Some((Vector3::from(p.velocity), c.try_inverse()?, p.gate))
+        });
+        let agrees = |v: &Vector3<f64>| {
+            prior.as_ref().is_none_or(|(pv, ci, gate)| {
+                let d = v - pv;
+                (d.transpose() * ci * d)[(0, 0)] <= *gate
+            })
+        };
+        if let Some((pv, _, _)) = &prior {
+            let mut v = *pv;
+            if cfg.model == Model::Planar {
+                v.z = 0.0;
+            }
+            let (count, cost) = score(&self.dirs, &self.vr, &v, thresh);
+            best = Some((count, cost, v));
+        }
         let mut max_iter = cfg.max_iterations;
         let mut it = 0;
         let mut sample = [0usize; 3];
@@ -240,6 +281,9 @@ impl EgoVelocityEstimator {
             ) else {
                 continue;
             };
+            if !agrees(&v) {
+                continue;
+            }
             let (count, cost) = score(&self.dirs, &self.vr, &v, thresh);
             if best
                 .as_ref()

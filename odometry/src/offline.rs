@@ -3,7 +3,7 @@
 //! body frame at radar rate on the session host clock, ready for `milliego eval` against ground
 //! truth.
 
-use crate::ego_velocity::{Config as EgoConfig, Detection, EgoVelocityEstimator, Status};
+use crate::ego_velocity::{Config as EgoConfig, Detection, EgoVelocityEstimator, Prior, Status};
 use crate::rio::{RadarMount, Rio, RioConfig, VelocityMeasurement};
 use crate::strapdown::ImuSample;
 use milliego_session::streams::{imu_samples, radar_frames, ClockFit, StreamReport};
@@ -123,28 +123,43 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
     if cfg.estimator == Estimator::Doppler && frames.is_empty() {
         return Err(OfflineError::Missing("radar frames"));
     }
+    // Host stamps mark a frame's LAST byte: take its transmission time off, so the lower
+    // envelope of (sensor, host) maps the sensor clock to when output began.
+    let radar_baud = session.meta.radar.as_ref().map_or(921_600, |r| r.baud);
+    let imu_baud = session.meta.imu.as_ref().map_or(115_200, |m| m.baud);
+    let tx = |bytes: usize, baud: u32| bytes as f64 * 10.0 / f64::from(baud.max(1));
     let radar_clock = ClockFit::fit(
         &frames
             .iter()
-            .filter_map(|f| Some((f.sensor_s?, f.host_s?)))
+            .filter_map(|f| Some((f.sensor_s?, f.host_s? - tx(f.bytes, radar_baud))))
             .collect::<Vec<_>>(),
     );
     let imu_clock = ClockFit::fit(
         &imu.iter()
-            .filter_map(|s| Some((s.sensor_s, s.host_s?)))
+            .filter_map(|s| Some((s.sensor_s, s.host_s? - tx(s.bytes, imu_baud))))
             .collect::<Vec<_>>(),
     );
     let clock_unsynced = radar_clock.is_none() || imu_clock.is_none();
     let imu_t = |s: f64| imu_clock.map_or(s - imu[0].sensor_s, |c| c.host(s));
+    // The frame's timestamp is taken when its output is ready; its points were measured earlier,
+    // at the middle of the chirps: subtract the processing time (stats TLV) and half the chirping.
+    let half_chirps_s = session
+        .radar_cfg()?
+        .and_then(|t| radar_driver::cfg::RadarConfig::parse(&t).ok())
+        .and_then(|c| c.derive(None).ok())
+        .map_or(0.0, |d| d.active_frame_time_ms / 2e3);
     let radar_t = |f: &milliego_session::streams::RadarFrame| -> Option<f64> {
-        match (radar_clock, f.sensor_s, f.host_s) {
-            (Some(c), Some(s), _) => Some(c.host(s)),
-            (None, _, Some(h)) => Some(h),
-            (None, Some(s), None) => {
-                Some(s - frames.first().and_then(|f| f.sensor_s).unwrap_or(0.0))
-            }
-            _ => None,
-        }
+        let ready = match (radar_clock, f.sensor_s, f.host_s) {
+            (Some(c), Some(s), _) => c.host(s),
+            (None, _, Some(h)) => h - tx(f.bytes, radar_baud),
+            (None, Some(s), None) => s - frames.first().and_then(|f| f.sensor_s).unwrap_or(0.0),
+            _ => return None,
+        };
+        let processing = f
+            .cloud
+            .stats
+            .map_or(0.0, |s| f64::from(s.inter_frame_processing_time_us) * 1e-6);
+        Some(ready - processing - half_chirps_s)
     };
 
     // Radar and IMU placement: the filter runs in the IMU frame.
@@ -213,7 +228,16 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
                 position: [p.x, p.y, p.z],
                 radial_velocity: p.velocity,
             }));
-            let e = ego.estimate(&dets);
+            // Guide the consensus with the filter's prediction once the velocity is known.
+            let prior = (rio.counters().updates >= 10).then(|| {
+                let (velocity, covariance) = rio.predicted_radar_velocity();
+                Prior {
+                    velocity,
+                    covariance,
+                    gate: cfg.rio.gate,
+                }
+            });
+            let e = ego.estimate_guided(&dets, prior);
             match e.status {
                 Status::Ok => {
                     res.ego_ok += 1;

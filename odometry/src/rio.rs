@@ -44,6 +44,10 @@ pub struct RioConfig {
     pub gate: f64,
     /// Gravity magnitude \[m/s^2\].
     pub gravity: f64,
+    /// Consecutive gated measurements after which the velocity is re-anchored to the measurement
+    /// (its uncertainty reset to `init_velocity_std`), so one bad stretch cannot lock the filter
+    /// out of every later update.
+    pub reanchor_after: u32,
 }
 
 impl Default for RioConfig {
@@ -60,6 +64,7 @@ impl Default for RioConfig {
             init_gyro_bias_std: 0.01,
             gate: 16.27,
             gravity: crate::strapdown::STANDARD_GRAVITY,
+            reanchor_after: 5,
         }
     }
 }
@@ -104,6 +109,9 @@ pub struct RioCounters {
     pub gated: u64,
     /// Radar measurements older than the filter time (applied late, at the current time).
     pub late: u64,
+    /// Times the filter re-anchored its velocity after a run of gated measurements (it had
+    /// diverged or the motion changed faster than the model allows).
+    pub reanchors: u64,
 }
 
 /// The filter.
@@ -117,6 +125,7 @@ pub struct Rio {
     pending: Vec<VelocityMeasurement>,
     counters: RioCounters,
     started: bool,
+    gated_run: u32,
 }
 
 impl Rio {
@@ -143,6 +152,7 @@ impl Rio {
             pending: Vec::new(),
             counters: RioCounters::default(),
             started: false,
+            gated_run: 0,
         }
     }
 
@@ -254,8 +264,24 @@ impl Rio {
         self.p = (self.p + self.p.transpose()) * 0.5;
     }
 
-    fn update(&mut self, m: &VelocityMeasurement) {
-        let st = *self.nav.state();
+    /// The radar velocity the filter predicts now, in the radar frame \[m/s\], and its covariance
+    /// (what [`crate::ego_velocity::EgoVelocityEstimator::estimate_guided`] takes as a prior).
+    pub fn predicted_radar_velocity(&self) -> ([f64; 3], [[f64; 3]; 3]) {
+        let (pred, h) = self.radar_model();
+        let c = h * self.p * h.transpose();
+        (
+            pred.into(),
+            [
+                [c[(0, 0)], c[(0, 1)], c[(0, 2)]],
+                [c[(1, 0)], c[(1, 1)], c[(1, 2)]],
+                [c[(2, 0)], c[(2, 1)], c[(2, 2)]],
+            ],
+        )
+    }
+
+    /// Predicted radar velocity and its Jacobian with respect to the error state.
+    fn radar_model(&self) -> (Vector3<f64>, M3x15) {
+        let st = self.nav.state();
         let r_wb = st.q.to_rotation_matrix().into_inner();
         let r_br = self.mount.rotation.to_rotation_matrix().into_inner();
         let t_br = self.mount.translation;
@@ -269,6 +295,12 @@ impl Rio {
             .copy_from(&(r_br.transpose() * v_b.cross_matrix()));
         h.fixed_view_mut::<3, 3>(0, 12)
             .copy_from(&(r_br.transpose() * t_br.cross_matrix()));
+        (pred, h)
+    }
+
+    fn update(&mut self, m: &VelocityMeasurement) {
+        let st = *self.nav.state();
+        let (pred, h) = self.radar_model();
         let rm = Matrix3::from_fn(|i, j| m.covariance[i][j]);
         let y = Vector3::from(m.velocity) - pred;
         let s = h * self.p * h.transpose() + rm;
@@ -279,8 +311,26 @@ impl Rio {
         let d2 = (y.transpose() * si * y)[(0, 0)];
         if !(d2.is_finite() && d2 <= self.cfg.gate) {
             self.counters.gated += 1;
-            return;
+            self.gated_run += 1;
+            if self.gated_run < self.cfg.reanchor_after || !d2.is_finite() {
+                return;
+            }
+            // Re-anchor: forget what the velocity was believed to be, then take this measurement.
+            self.counters.reanchors += 1;
+            self.gated_run = 0;
+            let s2 = self.cfg.init_velocity_std * self.cfg.init_velocity_std;
+            for r in 0..15 {
+                for c in 3..6 {
+                    self.p[(r, c)] = 0.0;
+                    self.p[(c, r)] = 0.0;
+                }
+            }
+            for k in 3..6 {
+                self.p[(k, k)] = s2;
+            }
+            return self.update(m);
         }
+        self.gated_run = 0;
         let k = self.p * h.transpose() * si;
         let dx: V15 = k * y;
         let ikh = M15::identity() - k * h;

@@ -205,3 +205,36 @@ fn deterministic_for_a_seed() {
     let b = EgoVelocityEstimator::new(cfg()).estimate(&dets);
     assert_eq!(a, b);
 }
+
+#[test]
+fn a_prior_picks_the_static_world_over_a_larger_coherent_ghost_set() {
+    // 12 static points moving with v, 25 ghosts coherent with a mirrored velocity: unguided RANSAC
+    // takes the ghosts, the filter's prior picks the world.
+    let mut rng = ChaCha8Rng::seed_from_u64(77);
+    let v = [0.1, 1.2, 0.0];
+    let ghost_v = [-1.1, -0.4, 0.2];
+    let (mut dets, _) = frame(&mut rng, v, 12, 0.0, 20.0);
+    let (ghosts, _) = frame(&mut rng, ghost_v, 25, 0.0, 20.0);
+    dets.extend(ghosts);
+    let mut est = EgoVelocityEstimator::new(cfg());
+    let free = est.estimate(&dets);
+    assert!(
+        (f64::from(free.velocity[0]) - ghost_v[0]).abs() < 0.1,
+        "unguided follows the larger set: {:?}",
+        free.velocity
+    );
+    let c = 0.05;
+    let prior = milliego_odometry::ego_velocity::Prior {
+        velocity: [0.0, 1.1, 0.0],
+        covariance: [[c, 0.0, 0.0], [0.0, c, 0.0], [0.0, 0.0, c]],
+        gate: 16.27,
+    };
+    let guided = est.estimate_guided(&dets, Some(prior));
+    assert!(guided.is_ok());
+    assert!(
+        (f64::from(guided.velocity[1]) - v[1]).abs() < 0.05,
+        "guided: {:?}",
+        guided.velocity
+    );
+    assert_eq!(guided.inlier_mask[..12].iter().filter(|m| **m).count(), 12);
+}

@@ -437,6 +437,8 @@ pub struct Derived {
     pub velocity_resolution_mps: f64,
     /// Largest unambiguous radial speed \[m/s\].
     pub max_velocity_mps: f64,
+    /// Time the chirps of one frame take: chirps x (idle + ramp end) \[ms\].
+    pub active_frame_time_ms: f64,
     /// Frame period after quantisation to 5 ns \[ms\].
     pub frame_period_ms: f64,
     /// Data UART rate \[bit/s\] (921600 unless configDataPort says otherwise).
@@ -607,6 +609,7 @@ impl RadarConfig {
             max_range_m,
             velocity_resolution_mps,
             max_velocity_mps,
+            active_frame_time_ms: f64::from(chirps_per_frame) * (idle + ramp_end) / 1e3,
             frame_period_ms: period_ms,
             data_baud,
             uart_bytes_per_frame,

@@ -20,6 +20,8 @@ pub struct RadarFrame {
     pub sensor_s: Option<f64>,
     /// Frame counter.
     pub frame_number: u32,
+    /// Frame length on the wire \[B\].
+    pub bytes: usize,
     /// Points, side info, targets.
     pub cloud: PointCloud,
 }
@@ -37,6 +39,8 @@ pub struct ImuSample {
     pub gyro: [f64; 3],
     /// PacketCounter, if sent.
     pub packet_counter: Option<u16>,
+    /// Message length on the wire \[B\].
+    pub bytes: usize,
 }
 
 /// What decoding a stream found.
@@ -87,6 +91,7 @@ pub fn radar_frames(session: &Session) -> Result<(Vec<RadarFrame>, StreamReport)
                         host_s,
                         sensor_s,
                         frame_number: h.frame_number,
+                        bytes: f.as_bytes().len(),
                         cloud: PointCloud::from_frame(&f, vres),
                     });
                 }
@@ -155,6 +160,7 @@ fn decode_imu(
                             accel,
                             gyro,
                             packet_counter: s.packet_counter,
+                            bytes: f.as_bytes().len(),
                         }),
                         _ => rep.not_samples += 1,
                     }

@@ -3,7 +3,7 @@
 
 use crate::error::TlvError;
 use crate::frame::Frame;
-use crate::tlv::{Dialect, Point, Target, Tlv};
+use crate::tlv::{Dialect, Point, Stats, Target, Tlv};
 
 /// The decoded content of one frame that egomotion and the dump care about.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -20,6 +20,8 @@ pub struct PointCloud {
     pub noise_db: Option<Vec<f32>>,
     /// Tracked targets (people-counting and toolbox frames).
     pub targets: Vec<Target>,
+    /// Processing statistics (OOB TLV 6), when sent.
+    pub stats: Option<Stats>,
     /// TLV types in frame order.
     pub tlv_types: Vec<u32>,
     /// True when a points TLV was present but empty (the SDK 3.5 zero-point quirk).
@@ -65,6 +67,7 @@ impl PointCloud {
                     c.noise_db = Some(s.iter().map(|e| e.noise_db()).collect());
                 }
                 Ok(Tlv::Targets(t)) => c.targets.extend(t.iter()),
+                Ok(Tlv::Stats(st)) => c.stats = Some(st),
                 Ok(_) => {}
                 Err(e) => c.tlv_errors.push(e),
             }
