@@ -488,7 +488,8 @@ fn read_loop(
                 continue
             }
             Err(e) => {
-                error = fail("read (device unplugged or closed?)", e);
+                let hint = format!("{e} (device unplugged, or the other end closed?)");
+                error = fail("read", io::Error::new(e.kind(), hint));
                 break;
             }
         };
