@@ -10,6 +10,8 @@ use std::process::ExitCode;
 mod imu;
 mod output;
 mod radar;
+mod record;
+mod replay;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -30,6 +32,10 @@ enum Command {
     /// Xsens MTi IMU: dump messages, configure a device.
     #[command(subcommand)]
     Imu(imu::ImuCmd),
+    /// Replay a session into pseudo-terminals or serial devices (the HIL rig).
+    Replay(replay::ReplayArgs),
+    /// Record the radar and IMU ports into a session.
+    Record(record::RecordArgs),
 }
 
 fn main() -> ExitCode {
@@ -37,6 +43,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Radar(cmd) => radar::run(cmd),
         Command::Imu(cmd) => imu::run(cmd),
+        Command::Replay(args) => replay::run(args),
+        Command::Record(args) => record::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
