@@ -5,8 +5,8 @@
 //!   SampleTimeFine), every frame paced at the UART rate of its baud.
 //! * [`fault`]: seeded, counted fault injection (corrupt, drop, garbage bursts, stalls, reopens).
 //! * [`sink`]: where a replay writes: pseudo-terminals it creates, or real serial devices.
-//! * [`replay`]: plays a session's streams into sinks, radar and IMU on one time line.
-//! * [`record`]: reads the radar and IMU data ports on their own threads into a session, losing
+//! * [`mod@replay`]: plays a session's streams into sinks, radar and IMU on one time line.
+//! * [`mod@record`]: reads the radar and IMU data ports on their own threads into a session, losing
 //!   nothing (bytes read == bytes written is checked at exit).
 //!
 //! Spec of the rig and its CLI: `docs/hil.md`; of the session format: `docs/session.md`.
