@@ -11,6 +11,7 @@ use milliego_hil::schedule::{self, StreamSchedule};
 use milliego_hil::{replay, FaultPlan, Notice, Pacing, ReplayOptions, ReplayReport, Sink};
 use milliego_hil::{StreamKind, Timing};
 use milliego_session::Session;
+use serialport::SerialPort;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -119,6 +120,38 @@ fn capture_excerpt_at_real_time_yields_the_files_frames() {
         o.report.streams[0].late_mean_ns / 1000,
         o.report.streams[1].late_mean_ns / 1000,
     );
+    // Arrival times at the drivers against the schedule (frame pieces of bare captures), both
+    // relative to the first frame of the radar.
+    let t_first = o.radar.times[0];
+    let due_first = o.schedules[0].pieces[0].t_ns;
+    for (name, seen, sched) in [
+        ("radar", &o.radar, &o.schedules[0]),
+        ("imu", &o.imu, &o.schedules[1]),
+    ] {
+        let errs: Vec<f64> = seen
+            .times
+            .iter()
+            .zip(&sched.pieces)
+            .map(|(t, p)| {
+                let got = if *t >= t_first {
+                    t.duration_since(t_first).as_secs_f64()
+                } else {
+                    -t_first.duration_since(*t).as_secs_f64()
+                };
+                got - (p.t_ns as f64 - due_first as f64) * 1e-9
+            })
+            .collect();
+        let max = errs.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+        let mean = errs.iter().map(|e| e.abs()).sum::<f64>() / errs.len() as f64;
+        println!(
+            "arrival vs schedule, {name}: {} frames, |error| mean {:.3} ms max {:.3} ms",
+            errs.len(),
+            mean * 1e3,
+            max * 1e3
+        );
+        // Generous: the order of a scheduler tick, not a frame period.
+        assert!(max < 0.05, "{name}: arrival off the schedule by {max} s");
+    }
     // Paced, not fast: the replay takes the session's time (generous bounds).
     assert!(o.wall >= end.mul_f64(0.9), "{:?} < {:?}", o.wall, end);
     assert!(o.wall <= end + Duration::from_secs(2));
@@ -350,4 +383,65 @@ fn a_reopened_pty_is_reported_and_counted() {
     assert!(Path::new(path).exists());
     println!("reopened: {before} -> {path}");
     drop(sinks);
+}
+
+#[test]
+fn loop_replays_the_session_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = synthetic_session(&dir.path().join("s"), 1.0);
+    let mut o = opts(Pacing::Fast);
+    o.passes = 2;
+    let out = run(&session, o);
+    for (kind, seen) in [(StreamKind::Radar, &out.radar), (StreamKind::Imu, &out.imu)] {
+        let bytes = stream_bytes(&session, kind);
+        let r = out.report.stream(kind).unwrap();
+        assert_eq!(r.passes, 2);
+        assert_eq!(r.bytes_written, 2 * bytes.len() as u64);
+        let once = match kind {
+            StreamKind::Radar => radar_frames_of(&bytes),
+            StreamKind::Imu => imu_frames_of(&bytes),
+        };
+        let twice: Vec<Vec<u8>> = once.iter().chain(&once).cloned().collect();
+        assert!(seen.frames == twice, "{kind:?}");
+    }
+}
+
+#[test]
+fn replay_into_a_serial_device_path() {
+    // A pty pair made here stands in for a USB-serial adapter: the rig opens the slave by path as
+    // a device; the "board" reads the master.
+    let dir = tempfile::tempdir().unwrap();
+    let session = synthetic_session(&dir.path().join("s"), 1.0);
+    let (mut board, adapter) = serialport::TTYPort::pair().unwrap();
+    board.set_timeout(Duration::from_millis(20)).unwrap();
+    let path = adapter.name().unwrap();
+    let s = Session::open(&session).unwrap();
+    let mut schedules = schedule::build(&s, None, None).unwrap();
+    schedules.retain(|s| s.kind == StreamKind::Imu);
+    let sink = Sink::device(StreamKind::Imu, &path, 115_200).unwrap();
+    assert!(!sink.is_pty());
+    let reader = thread::spawn(move || read_all(Box::new(board), Duration::from_millis(500)));
+    let (report, sinks) = replay(schedules, vec![sink], &opts(Pacing::Speed(4.0))).unwrap();
+    let got = reader.join().unwrap();
+    drop(sinks);
+    drop(adapter);
+    assert_eq!(report.streams.len(), 1);
+    assert!(got == stream_bytes(&session, StreamKind::Imu));
+}
+
+#[test]
+fn bad_options_are_refused_with_their_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = synthetic_session(&dir.path().join("s"), 0.5);
+    let s = Session::open(&session).unwrap();
+    let schedules = schedule::build(&s, None, None).unwrap();
+    let mut o = opts(Pacing::Speed(0.0));
+    let e = replay(schedules.clone(), vec![], &o).unwrap_err();
+    assert!(e.to_string().contains("--speed"), "{e}");
+    o.pacing = Pacing::Fast;
+    let e = replay(schedules.clone(), vec![], &o).unwrap_err();
+    assert!(e.to_string().contains("no output port"), "{e}");
+    o.faults.corrupt = 2.0;
+    let e = replay(schedules, vec![], &o).unwrap_err();
+    assert!(e.to_string().contains("--corrupt"), "{e}");
 }

@@ -131,6 +131,8 @@ pub fn open_slave(sink: &Sink) -> Box<dyn serialport::SerialPort> {
 #[derive(Debug, Default, Clone)]
 pub struct Seen {
     pub frames: Vec<Vec<u8>>,
+    /// Host time each frame's last byte was read.
+    pub times: Vec<Instant>,
     pub frames_bad: u64,
     pub bytes_skipped: u64,
     pub bytes_in: u64,
@@ -152,6 +154,7 @@ pub fn read_radar(
         match r.next_event() {
             Ok(Some(ReadEvent::Frame(f))) => {
                 seen.frames.push(f.as_bytes().to_vec());
+                seen.times.push(f.host_time);
                 last = Instant::now();
             }
             Ok(Some(ReadEvent::Dropped { .. })) => last = Instant::now(),
@@ -184,8 +187,9 @@ pub fn read_imu(
     let mut last = Instant::now();
     while t0.elapsed() < limit {
         match r.next_event() {
-            Ok(Some(imu_driver::host::Event::Frame { frame, .. })) => {
+            Ok(Some(imu_driver::host::Event::Frame { frame, at })) => {
                 seen.frames.push(frame.as_bytes().to_vec());
+                seen.times.push(at);
                 last = Instant::now();
             }
             Ok(Some(imu_driver::host::Event::Dropped { .. })) => last = Instant::now(),
