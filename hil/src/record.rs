@@ -181,8 +181,8 @@ enum Msg {
     },
 }
 
-struct ReaderEnd {
-    port: Box<dyn SerialPort>,
+struct ReaderEnd<P> {
+    port: P,
     error: Option<HilError>,
 }
 
@@ -441,17 +441,17 @@ fn open(
 }
 
 #[allow(clippy::too_many_arguments)]
-fn read_loop(
+fn read_loop<P: io::Read>(
     kind: StreamKind,
     path: String,
-    mut port: Box<dyn SerialPort>,
+    mut port: P,
     tx: Sender<Msg>,
     live: &Live,
     stop: &AtomicBool,
     failed: &AtomicBool,
     anchor: Instant,
     max_block: Duration,
-) -> ReaderEnd {
+) -> ReaderEnd<P> {
     let l = live.stream(kind);
     let mut buf = vec![0u8; 1 << 16];
     let fail = |action: &'static str, source: io::Error| {
@@ -663,4 +663,87 @@ fn print_progress(
     }
     let mut err = io::stderr().lock();
     let _ = writeln!(err, "{line}");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A port that yields `chunks` reads of 100 bytes, then times out.
+    struct Chunks(usize);
+
+    impl io::Read for Chunks {
+        fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+            if self.0 == 0 {
+                thread::sleep(Duration::from_millis(5));
+                return Err(io::ErrorKind::TimedOut.into());
+            }
+            self.0 -= 1;
+            buf[..100].fill(0x55);
+            Ok(100)
+        }
+    }
+
+    fn reader(
+        chunks: usize,
+        queue: usize,
+        max_block: Duration,
+    ) -> (
+        crossbeam_channel::Receiver<Msg>,
+        Arc<Live>,
+        Arc<AtomicBool>,
+        thread::JoinHandle<ReaderEnd<Chunks>>,
+    ) {
+        let (tx, rx) = bounded(queue);
+        let live = Arc::new(Live::default());
+        let stop = Arc::new(AtomicBool::new(false));
+        let (l, s) = (live.clone(), stop.clone());
+        let h = thread::spawn(move || {
+            let failed = AtomicBool::new(false);
+            read_loop(
+                StreamKind::Imu,
+                "fake".into(),
+                Chunks(chunks),
+                tx,
+                &l,
+                &s,
+                &failed,
+                Instant::now(),
+                max_block,
+            )
+        });
+        (rx, live, stop, h)
+    }
+
+    #[test]
+    fn a_slow_writer_blocks_the_reader_counted_and_loses_nothing() {
+        let (rx, live, stop, h) = reader(20, 1, Duration::from_secs(5));
+        let mut got = 0u64;
+        while got < 2000 {
+            thread::sleep(Duration::from_millis(3));
+            match rx.recv_timeout(Duration::from_secs(5)) {
+                Ok(Msg::Chunk { bytes, .. }) => got += bytes.len() as u64,
+                Err(e) => panic!("{e}"),
+            }
+        }
+        stop.store(true, Ordering::SeqCst);
+        let end = h.join().unwrap();
+        assert!(end.error.is_none());
+        assert_eq!(live.imu.bytes_read.load(Ordering::SeqCst), 2000);
+        assert!(live.imu.queue_full.load(Ordering::SeqCst) > 0);
+        assert!(live.imu.max_wait_ns.load(Ordering::SeqCst) > 0);
+    }
+
+    #[test]
+    fn a_stuck_writer_fails_the_recording_loudly() {
+        let (rx, live, _stop, h) = reader(5, 1, Duration::from_millis(100));
+        let end = h.join().unwrap();
+        let e = end.error.expect("an error").to_string();
+        assert!(
+            e.contains("stayed full") && e.contains("100 B read but not written"),
+            "{e}"
+        );
+        assert_eq!(live.imu.bytes_read.load(Ordering::SeqCst), 200);
+        drop(rx);
+    }
 }

@@ -264,3 +264,94 @@ fn sample_time(f: &imu_driver::XbusFrame<'_>) -> Option<u32> {
         _ => None,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use imu_driver::MtData2Writer;
+    use radar_driver::encode::FrameBuilder;
+
+    fn radar(n: u32, cycles: u32) -> Vec<u8> {
+        FrameBuilder::oob(0x0303_0002, 0xA6843, n)
+            .cycles(cycles)
+            .to_vec()
+    }
+
+    fn imu(stf: Option<u32>) -> Vec<u8> {
+        let mut buf = [0u8; 64];
+        let mut w = MtData2Writer::new(&mut buf);
+        w.value(imu_driver::DataId(0x1020), &Value::PacketCounter(1))
+            .unwrap();
+        if let Some(t) = stf {
+            w.value(imu_driver::DataId(0x1060), &Value::SampleTimeFine(t))
+                .unwrap();
+        }
+        let n = w.finish(0xFF).unwrap();
+        buf[..n].to_vec()
+    }
+
+    #[test]
+    fn radar_frames_are_timed_by_frame_number_or_cycles() {
+        // Frames 10, 11, 13 (one missing) at 200 MHz, 50 ms apart; junk before the first.
+        let mut data = vec![0xAA; 5];
+        for (n, c) in [(10u32, 1_000u32), (11, 10_001_000), (13, 30_001_000)] {
+            data.extend(radar(n, c));
+        }
+        let (frames, timing) = radar_frames(&data, Some(0.05));
+        assert_eq!(timing, Timing::RadarFrameNumber { period_s: 0.05 });
+        let t: Vec<f64> = frames.iter().map(|f| f.2.unwrap()).collect();
+        assert!(t[0] == 0.0 && (t[1] - 0.05).abs() < 1e-12 && (t[2] - 0.15).abs() < 1e-12);
+        assert_eq!(frames[0].0, 5, "the frame starts after the junk");
+        let (frames, timing) = radar_frames(&data, None);
+        assert_eq!(timing, Timing::RadarCycles);
+        let t: Vec<f64> = frames.iter().map(|f| f.2.unwrap()).collect();
+        assert!(
+            (t[1] - 0.05).abs() < 1e-9 && (t[2] - 0.15).abs() < 1e-9,
+            "{t:?}"
+        );
+    }
+
+    #[test]
+    fn pieces_follow_the_clock_but_never_beat_the_uart() {
+        // Two 1000-byte frames 1 ms apart on the sensor clock at 115200 bit/s (86.8 ms each).
+        let frames = [(0, 1000, Some(0.0)), (1000, 2000, Some(0.001))];
+        let p = sensor_pieces(&frames, 2010, 115_200);
+        let tx = uart_ns(1000, 115_200);
+        assert_eq!(p[0].t_ns, tx);
+        assert_eq!(
+            p[1].t_ns,
+            2 * tx,
+            "the second frame waits for the first on the wire"
+        );
+        assert_eq!(
+            (p[2].start, p[2].end),
+            (2000, 2010),
+            "the tail is a piece too"
+        );
+        assert_eq!(p[2].t_ns, 2 * tx + uart_ns(10, 115_200));
+        // Far apart: the clock rules.
+        let frames = [(0, 100, Some(0.0)), (100, 200, Some(1.0))];
+        let p = sensor_pieces(&frames, 200, 921_600);
+        assert_eq!(p[1].t_ns, 1_000_000_000 + uart_ns(100, 921_600));
+    }
+
+    #[test]
+    fn imu_messages_are_timed_by_sample_time_fine() {
+        let mut data = Vec::new();
+        data.extend(imu(Some(u32::MAX - 50))); // wraps after 51 ticks
+        data.extend(imu(Some(50)));
+        data.extend(imu(None));
+        let (frames, timing) = imu_frames(&data, TimeWrap::Pow32);
+        assert_eq!(timing, Timing::ImuSampleTime);
+        assert_eq!(frames[0].2, Some(0.0));
+        assert!((frames[1].2.unwrap() - 0.0101).abs() < 1e-12);
+        assert_eq!(frames[2].2, None);
+        let p = sensor_pieces(&frames, data.len() as u64, 115_200);
+        assert!(
+            p[2].t_ns > p[1].t_ns,
+            "a message without time follows the previous one"
+        );
+        let (_, timing) = imu_frames(&imu(None), TimeWrap::Pow32);
+        assert_eq!(timing, Timing::Baud);
+    }
+}

@@ -24,6 +24,7 @@ fn replay_and_record(
     session: &Path,
     out: &Path,
     opts: ReplayOptions,
+    queue_chunks: usize,
 ) -> (Result<RecordReport, HilError>, milliego_hil::ReplayReport) {
     let s = Session::open(session).unwrap();
     let schedules = schedule::build(&s, None, None).unwrap();
@@ -47,6 +48,7 @@ fn replay_and_record(
         }),
         configure: false,
         stop: stop.clone(),
+        queue_chunks,
         ..RecordConfig::default()
     };
     let live = Arc::new(Live::default());
@@ -92,7 +94,7 @@ fn recording_a_replay_reproduces_the_session_bytes() {
         pacing: Pacing::Speed(10.0),
         ..ReplayOptions::default()
     };
-    let (rec, _) = replay_and_record(&src, &out, opts);
+    let (rec, _) = replay_and_record(&src, &out, opts, 1024);
     let rec = rec.unwrap();
     for r in &rec.streams {
         assert_eq!(r.bytes_read, r.bytes_written);
@@ -139,7 +141,7 @@ fn recording_a_bare_capture_replay_reproduces_its_bytes() {
         pacing: Pacing::Speed(10.0),
         ..ReplayOptions::default()
     };
-    let (rec, _) = replay_and_record(&src, &out, opts);
+    let (rec, _) = replay_and_record(&src, &out, opts, 1024);
     rec.unwrap();
     let s = Session::open(&src).unwrap();
     let want_radar = s.radar.unwrap().read_all().unwrap();
@@ -166,7 +168,7 @@ fn a_stalled_stream_shows_as_a_gap_in_the_recorded_index() {
         },
         ..ReplayOptions::default()
     };
-    let (rec, rep) = replay_and_record(&src, &out, opts);
+    let (rec, rep) = replay_and_record(&src, &out, opts, 1024);
     rec.unwrap();
     assert_eq!(rep.stream(StreamKind::Imu).unwrap().faults.stalls, 1);
     let s = Session::open(&out).unwrap();
@@ -202,7 +204,7 @@ fn a_port_that_disappears_ends_the_recording_with_an_error_naming_it() {
         },
         ..ReplayOptions::default()
     };
-    let (rec, _) = replay_and_record(&src, &out, opts);
+    let (rec, _) = replay_and_record(&src, &out, opts, 1024);
     let err = rec.expect_err("the radar port went away");
     let msg = err.to_string();
     println!("{msg}");
@@ -258,4 +260,36 @@ fn nothing_to_record_and_missing_ports_are_clear_errors() {
         m.contains("/dev/does-not-exist-42") && m.contains("open"),
         "{m}"
     );
+}
+
+#[test]
+fn a_one_chunk_queue_still_loses_nothing() {
+    // The readers block on the full queue (counted) instead of dropping.
+    let dir = tempfile::tempdir().unwrap();
+    let src = session_dir(dir.path());
+    let out = dir.path().join("rec");
+    let opts = ReplayOptions {
+        pacing: Pacing::Fast,
+        ..ReplayOptions::default()
+    };
+    let (rec, _) = replay_and_record(&src, &out, opts, 1);
+    let rec = rec.unwrap();
+    for r in &rec.streams {
+        assert_eq!(r.bytes_read, r.bytes_written);
+        println!(
+            "{:?}: queue full {}x, longest wait {} us",
+            r.stream,
+            r.queue_full,
+            r.max_wait_ns / 1000
+        );
+    }
+    for (name, kind) in [
+        ("radar.bin", StreamKind::Radar),
+        ("imu.bin", StreamKind::Imu),
+    ] {
+        assert!(
+            std::fs::read(out.join(name)).unwrap() == stream_bytes(&src, kind),
+            "{name}"
+        );
+    }
 }
