@@ -57,12 +57,18 @@ pub fn run(a: RecordArgs) -> Result<(), Box<dyn std::error::Error>> {
     let stop = Arc::new(AtomicBool::new(false));
     signal_hook::flag::register(signal_hook::consts::SIGINT, stop.clone())?;
     signal_hook::flag::register(signal_hook::consts::SIGTERM, stop.clone())?;
-    let duration = match a.duration {
-        Some(d) if !(d.is_finite() && d > 0.0) => {
-            return Err(format!("--duration {d}: must be a positive number of seconds").into())
-        }
-        d => d.map(Duration::from_secs_f64),
-    };
+    let duration =
+        match a.duration {
+            Some(d) if d > 0.0 => Some(Duration::try_from_secs_f64(d).map_err(|_| {
+                format!("--duration {d}: must be a finite positive number of seconds")
+            })?),
+            Some(d) => {
+                return Err(
+                    format!("--duration {d}: must be a finite positive number of seconds").into(),
+                )
+            }
+            None => None,
+        };
     let cfg = RecordConfig {
         out: a.out,
         radar: a.radar_data.map(|data| RadarPorts {

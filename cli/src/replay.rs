@@ -98,6 +98,8 @@ pub fn run(a: ReplayArgs) -> Result<(), Box<dyn std::error::Error>> {
         faults.reopens.push(parse_reopen(s)?);
     }
     faults.validate()?;
+    seconds("--start-delay", a.start_delay)?;
+    seconds("--linger", a.linger)?;
 
     let stop = Arc::new(AtomicBool::new(false));
     signal_hook::flag::register(signal_hook::consts::SIGINT, stop.clone())?;
@@ -145,7 +147,7 @@ pub fn run(a: ReplayArgs) -> Result<(), Box<dyn std::error::Error>> {
     if a.wait_open {
         for s in &sinks {
             eprintln!("waiting for {} to be opened ...", s.path());
-            if !s.wait_open(Duration::from_secs(u64::MAX / 4), &stopped) {
+            if !s.wait_open(None, &stopped) {
                 return Err("stopped before the ports were opened".into());
             }
         }
@@ -155,12 +157,7 @@ pub fn run(a: ReplayArgs) -> Result<(), Box<dyn std::error::Error>> {
         let mut line = String::new();
         std::io::stdin().lock().read_line(&mut line)?;
     }
-    if a.start_delay > 0.0 {
-        let until = Instant::now() + Duration::from_secs_f64(a.start_delay);
-        while Instant::now() < until && !stopped() {
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
+    wait(seconds("--start-delay", a.start_delay)?, &stopped);
 
     let (tx, rx) = crossbeam_channel::unbounded();
     let printer = std::thread::spawn(move || {
@@ -187,11 +184,8 @@ pub fn run(a: ReplayArgs) -> Result<(), Box<dyn std::error::Error>> {
     let (report, sinks) = milliego_hil::replay(schedules, sinks, &opts)?;
     drop(opts);
     let _ = printer.join();
-    if sinks.iter().any(Sink::is_pty) && !stopped() {
-        let until = Instant::now() + Duration::from_secs_f64(a.linger.max(0.0));
-        while Instant::now() < until && !stopped() {
-            std::thread::sleep(Duration::from_millis(20));
-        }
+    if sinks.iter().any(Sink::is_pty) {
+        wait(seconds("--linger", a.linger)?, &stopped);
     }
     drop(sinks);
     eprintln!(
@@ -221,4 +215,18 @@ pub fn run(a: ReplayArgs) -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     Ok(())
+}
+
+/// A duration option \[s\]: finite and >= 0.
+fn seconds(name: &str, s: f64) -> Result<Duration, String> {
+    Duration::try_from_secs_f64(s)
+        .map_err(|_| format!("{name} {s}: must be a finite number of seconds >= 0"))
+}
+
+/// Sleeps `d` unless stopped first.
+fn wait(d: Duration, stopped: &dyn Fn() -> bool) {
+    let start = Instant::now();
+    while start.elapsed() < d && !stopped() {
+        std::thread::sleep(Duration::from_millis(20).min(d));
+    }
 }

@@ -91,12 +91,12 @@ impl Sink {
         count_open(Path::new(&self.path)).saturating_sub(1)
     }
 
-    /// Waits until someone opened the pty slave, up to `timeout`; true when it was opened (always
-    /// true for devices).
-    pub fn wait_open(&self, timeout: Duration, stop: &dyn Fn() -> bool) -> bool {
-        let deadline = Instant::now() + timeout;
+    /// Waits until someone opened the pty slave, up to `timeout` (`None`: until `stop`); true when
+    /// it was opened (always true for devices).
+    pub fn wait_open(&self, timeout: Option<Duration>, stop: &dyn Fn() -> bool) -> bool {
+        let deadline = timeout.and_then(|t| Instant::now().checked_add(t));
         while self.is_pty() && self.slave_openers() == 0 {
-            if Instant::now() >= deadline || stop() {
+            if deadline.is_some_and(|d| Instant::now() >= d) || stop() {
                 return false;
             }
             thread::sleep(Duration::from_millis(20));

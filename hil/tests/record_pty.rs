@@ -58,7 +58,7 @@ fn replay_and_record(
     };
     for s in &sinks {
         assert!(
-            s.wait_open(Duration::from_secs(5), &|| false),
+            s.wait_open(Some(Duration::from_secs(5)), &|| false),
             "the recorder did not open {}",
             s.path()
         );
