@@ -195,34 +195,102 @@ pub fn record(cfg: &RecordConfig, live: &Arc<Live>) -> Result<RecordReport, HilE
             "nothing to record: give the radar data port and/or the IMU port".into(),
         ));
     }
-    let mut writer = SessionWriter::create(&cfg.out, Meta::new(Source::Recorded))?;
-    let mut warnings = Vec::new();
-
-    // Configure.
-    let mut cli = None;
-    let mut radar_port = None;
-    if let Some(r) = &cfg.radar {
-        if let Some(text) = &r.cfg {
-            writer.radar_cfg(text)?;
-        }
-        {
-            let m = writer.meta_mut().radar.get_or_insert_with(Default::default);
-            m.baud = r.data_baud;
-            m.port = Some(r.data.clone());
-        }
-        // Open the data port first so nothing the radar sends after sensorStart is missed.
-        radar_port = Some(open(
-            StreamKind::Radar,
-            &r.data,
-            r.data_baud,
-            cfg.read_timeout,
-        )?);
-        if cfg.configure {
-            let (Some(cli_path), Some(text)) = (&r.cli, &r.cfg) else {
+    if cfg.configure {
+        if let Some(r) = &cfg.radar {
+            if r.cli.is_none() || r.cfg.is_none() {
                 return Err(HilError::Invalid(
                     "configuring the radar needs --radar-cli and --radar-cfg (or use --no-config)"
                         .into(),
                 ));
+            }
+        }
+    }
+    let mut writer = SessionWriter::create(&cfg.out, Meta::new(Source::Recorded))?;
+    let mut warnings = Vec::new();
+    if let Some(r) = &cfg.radar {
+        if let Some(text) = &r.cfg {
+            writer.radar_cfg(text)?;
+        }
+        let m = writer.meta_mut().radar.get_or_insert_with(Default::default);
+        m.baud = r.data_baud;
+        m.port = Some(r.data.clone());
+    }
+    if let Some(m) = &cfg.imu {
+        let im = writer.meta_mut().imu.get_or_insert_with(Default::default);
+        im.baud = m.baud;
+        im.port = Some(m.path.clone());
+        if cfg.configure {
+            im.rate_hz = Some(f64::from(m.rate_hz));
+        }
+    }
+
+    // The writer first, then each reader as soon as its port is ready: the radar's before its
+    // sensorStart, the IMU's right after its configuration, so the kernel's buffer never has to
+    // hold a stream while the other sensor is being configured. Session time starts here.
+    let anchor = Instant::now();
+    let (tx, rx) = bounded::<Msg>(cfg.queue_chunks.max(1));
+    let halt = Arc::new(AtomicBool::new(false));
+    let failed = Arc::new(AtomicBool::new(false));
+    let mut files = Vec::new();
+    if cfg.radar.is_some() {
+        files.push((StreamKind::Radar, writer.stream(StreamKind::Radar)?));
+    }
+    if cfg.imu.is_some() {
+        files.push((StreamKind::Imu, writer.stream(StreamKind::Imu)?));
+    }
+    let wlive = live.clone();
+    let progress = cfg.progress;
+    let writer_thread = thread::Builder::new()
+        .name("record-writer".into())
+        .spawn(move || write_loop(rx, files, &wlive, progress, anchor))
+        .map_err(|e| HilError::Invalid(format!("cannot start the writer thread: {e}")))?;
+    let spawn = |kind: StreamKind, path: String, port: Box<dyn SerialPort>| {
+        let (tx, live, halt, failed) = (tx.clone(), live.clone(), halt.clone(), failed.clone());
+        let max_block = cfg.max_block;
+        thread::Builder::new()
+            .name(format!("record-{}", kind.name()))
+            .spawn(move || {
+                read_loop(
+                    kind, path, port, tx, &live, &halt, &failed, anchor, max_block,
+                )
+            })
+            .map_err(|e| HilError::Invalid(format!("cannot start a reader thread: {e}")))
+    };
+    let mut readers = Vec::new();
+    let mut cli = None;
+    let setup = (|| -> Result<(), HilError> {
+        if let Some(r) = &cfg.radar {
+            let port = open(StreamKind::Radar, &r.data, r.data_baud, cfg.read_timeout)?;
+            readers.push((
+                StreamKind::Radar,
+                spawn(StreamKind::Radar, r.data.clone(), port)?,
+            ));
+        }
+        if let Some(m) = &cfg.imu {
+            let mut port = open(StreamKind::Imu, &m.path, m.baud, cfg.read_timeout)?;
+            if cfg.configure {
+                let mut dev = Device::new(port);
+                let report = dev
+                    .configure(&imu_plan(m.rate_hz))
+                    .map_err(|e| HilError::Config {
+                        stream: StreamKind::Imu,
+                        what: format!("{}: {e}", m.path),
+                    })?;
+                writer
+                    .meta_mut()
+                    .imu
+                    .get_or_insert_with(Default::default)
+                    .device = Some(report.product_code.trim().to_string());
+                port = dev.into_reader().into_inner();
+            }
+            readers.push((
+                StreamKind::Imu,
+                spawn(StreamKind::Imu, m.path.clone(), port)?,
+            ));
+        }
+        if let (true, Some(r)) = (cfg.configure, &cfg.radar) {
+            let (Some(cli_path), Some(text)) = (&r.cli, &r.cfg) else {
+                return Ok(());
             };
             let port = open(
                 StreamKind::Radar,
@@ -231,97 +299,27 @@ pub fn record(cfg: &RecordConfig, live: &Arc<Live>) -> Result<RecordReport, HilE
                 Duration::from_millis(50),
             )?;
             let mut c = CliPort::new(port, Duration::from_secs(2));
-            c.upload(text).map_err(|e| HilError::Config {
+            let uploaded = c.upload(text);
+            // sensorStop at the end even when a later line failed after sensorStart.
+            cli = Some(c);
+            uploaded.map_err(|e| HilError::Config {
                 stream: StreamKind::Radar,
                 what: format!("{cli_path}: {e}"),
             })?;
-            cli = Some(c);
         }
-    }
-    let mut imu_port = None;
-    if let Some(m) = &cfg.imu {
-        {
-            let im = writer.meta_mut().imu.get_or_insert_with(Default::default);
-            im.baud = m.baud;
-            im.port = Some(m.path.clone());
-            if cfg.configure {
-                im.rate_hz = Some(f64::from(m.rate_hz));
-            }
-        }
-        let port = open(StreamKind::Imu, &m.path, m.baud, cfg.read_timeout)?;
-        imu_port = Some(if cfg.configure {
-            let mut dev = Device::new(port);
-            let plan = imu_plan(m.rate_hz);
-            let report = dev.configure(&plan).map_err(|e| HilError::Config {
-                stream: StreamKind::Imu,
-                what: format!("{}: {e}", m.path),
-            })?;
-            writer
-                .meta_mut()
-                .imu
-                .get_or_insert_with(Default::default)
-                .device = Some(report.product_code.trim().to_string());
-            dev.into_reader().into_inner()
-        } else {
-            port
-        });
-    }
-
-    // Record.
-    let anchor = Instant::now();
-    let (tx, rx) = bounded::<Msg>(cfg.queue_chunks.max(1));
-    let failed = Arc::new(AtomicBool::new(false));
-    let mut readers = Vec::new();
-    for (kind, port, path) in [
-        (
-            StreamKind::Radar,
-            radar_port,
-            cfg.radar.as_ref().map(|r| r.data.clone()),
-        ),
-        (
-            StreamKind::Imu,
-            imu_port,
-            cfg.imu.as_ref().map(|m| m.path.clone()),
-        ),
-    ] {
-        let (Some(port), Some(path)) = (port, path) else {
-            continue;
-        };
-        let tx = tx.clone();
-        let live = live.clone();
-        let stop = cfg.stop.clone();
-        let failed = failed.clone();
-        let max_block = cfg.max_block;
-        let h = thread::Builder::new()
-            .name(format!("record-{}", kind.name()))
-            .spawn(move || {
-                read_loop(
-                    kind, path, port, tx, &live, &stop, &failed, anchor, max_block,
-                )
-            })
-            .map_err(|e| HilError::Invalid(format!("cannot start a reader thread: {e}")))?;
-        readers.push((kind, h));
-    }
+        Ok(())
+    })();
     drop(tx);
-    let streams: Vec<StreamKind> = readers.iter().map(|r| r.0).collect();
-    let mut files = Vec::new();
-    for &k in &streams {
-        files.push((k, writer.stream(k)?));
-    }
-    let wlive = live.clone();
-    let progress = cfg.progress;
-    let writer_thread = thread::Builder::new()
-        .name("record-writer".into())
-        .spawn(move || write_loop(rx, files, &wlive, progress, anchor))
-        .map_err(|e| HilError::Invalid(format!("cannot start the writer thread: {e}")))?;
 
-    while !cfg.stop.load(Ordering::SeqCst)
-        && !failed.load(Ordering::SeqCst)
-        && cfg.duration.is_none_or(|d| anchor.elapsed() < d)
-    {
-        thread::sleep(Duration::from_millis(20));
+    if setup.is_ok() {
+        while !cfg.stop.load(Ordering::SeqCst)
+            && !failed.load(Ordering::SeqCst)
+            && cfg.duration.is_none_or(|d| anchor.elapsed() < d)
+        {
+            thread::sleep(Duration::from_millis(20));
+        }
     }
-    cfg.stop.store(true, Ordering::SeqCst);
+    halt.store(true, Ordering::SeqCst);
 
     let mut first_err = None;
     let mut ends = Vec::new();
@@ -363,6 +361,8 @@ pub fn record(cfg: &RecordConfig, live: &Arc<Live>) -> Result<RecordReport, HilE
     }
 
     let written = written?;
+    // A failed setup leaves the data files but no session.toml: not a session.
+    setup?;
     let dir = writer.finish()?;
     if let Some(e) = first_err {
         return Err(e);

@@ -48,7 +48,7 @@ pub enum Notice {
         /// The device path now.
         path: String,
     },
-    /// A sink took no bytes for over a second (nobody reading a pty?).
+    /// A sink refused bytes for [`crate::sink::BLOCKED_NOTICE`] (nobody reading a pty?).
     Blocked {
         /// Which stream.
         stream: StreamKind,
@@ -275,7 +275,6 @@ fn run_stream(
     let mut shift = 0u64; // stall delays so far [ns of session time]
     let mut wire_end = 0u64; // session time the last written byte left [ns]
     let mut last_drain = Instant::now();
-    let mut blocked_since: Option<Instant> = None;
     let mut wire = Vec::with_capacity(1 << 16);
     let mut pass = 0u32;
     'passes: while opts.passes == 0 || pass < opts.passes {
@@ -342,22 +341,16 @@ fn run_stream(
                 if scale.is_some() && !sleep_until(due, &stop) {
                     break 'passes;
                 }
-                let blocked = sink.write_all(chunk, &stop)?;
-                rep.blocked_ns += u64::try_from(blocked.as_nanos()).unwrap_or(u64::MAX);
-                if blocked > Duration::ZERO {
-                    let since = *blocked_since.get_or_insert_with(Instant::now);
-                    if since.elapsed() > Duration::from_secs(1) {
-                        if let Some(n) = &opts.notify {
-                            let _ = n.send(Notice::Blocked {
-                                stream: s.kind,
-                                path: sink.path().to_string(),
-                            });
-                        }
-                        blocked_since = Some(Instant::now() + Duration::from_secs(3600));
+                let mut tell = |path: &str| {
+                    if let Some(n) = &opts.notify {
+                        let _ = n.send(Notice::Blocked {
+                            stream: s.kind,
+                            path: path.to_string(),
+                        });
                     }
-                } else if blocked_since.is_some_and(|b| b <= Instant::now()) {
-                    blocked_since = None;
-                }
+                };
+                let blocked = sink.write_all(chunk, &stop, &mut tell)?;
+                rep.blocked_ns += u64::try_from(blocked.as_nanos()).unwrap_or(u64::MAX);
                 rep.bytes_written += chunk.len() as u64;
                 rep.writes += 1;
                 if scale.is_some() {

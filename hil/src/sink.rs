@@ -8,6 +8,9 @@ use std::path::Path;
 use std::thread;
 use std::time::{Duration, Instant};
 
+/// How long one write may be refused before the caller is told (nobody reading a pty?).
+pub const BLOCKED_NOTICE: Duration = Duration::from_secs(1);
+
 /// Write timeout of a sink's port: bounds how late a blocked write notices a stop request.
 const WRITE_TIMEOUT: Duration = Duration::from_millis(100);
 
@@ -105,14 +108,17 @@ impl Sink {
     }
 
     /// Writes all of `bytes`, retrying while the port is full (a reader that is slow or absent),
-    /// until `stop` says so. Returns the time spent blocked.
+    /// until `stop` says so; `on_blocked` is called once when this call has been blocked for
+    /// [`BLOCKED_NOTICE`]. Returns the time spent blocked.
     pub(crate) fn write_all(
         &mut self,
         bytes: &[u8],
         stop: &dyn Fn() -> bool,
+        on_blocked: &mut dyn FnMut(&str),
     ) -> Result<Duration, HilError> {
         let mut rest = bytes;
         let mut blocked = Duration::ZERO;
+        let mut told = false;
         while !rest.is_empty() {
             let t = Instant::now();
             let r = match &mut self.port {
@@ -140,6 +146,10 @@ impl Sink {
                     ) =>
                 {
                     blocked += t.elapsed();
+                    if !told && blocked >= BLOCKED_NOTICE {
+                        told = true;
+                        on_blocked(&self.path);
+                    }
                     if stop() {
                         return Ok(blocked);
                     }

@@ -228,3 +228,60 @@ fn record_configures_both_sensors_records_their_bytes_and_stops_them() {
     );
     assert_eq!(s.meta.imu.as_ref().unwrap().rate_hz, Some(100.0));
 }
+
+#[test]
+fn a_silent_imu_fails_the_setup_naming_its_port_and_writes_no_session() {
+    let (_imu_m, _imu_s, imu_path) = pair(); // nobody answers on the master side
+    let (data_m, _data_s, data_path) = pair();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("rec");
+    let cfg = RecordConfig {
+        out: out.clone(),
+        radar: Some(RadarPorts {
+            data: data_path,
+            data_baud: 921_600,
+            cli: Some("/dev/null".into()),
+            cfg: Some("sensorStart\n".into()),
+        }),
+        imu: Some(ImuPort {
+            path: imu_path.clone(),
+            baud: 115_200,
+            rate_hz: 100,
+        }),
+        configure: true,
+        duration: Some(Duration::from_secs(5)),
+        ..RecordConfig::default()
+    };
+    let t = Instant::now();
+    let e = record(&cfg, &Arc::new(Live::default())).unwrap_err();
+    let m = e.to_string();
+    assert!(
+        m.starts_with("imu configuration failed") && m.contains(&imu_path),
+        "{m}"
+    );
+    assert!(
+        t.elapsed() < Duration::from_secs(4),
+        "gave up after {:?}",
+        t.elapsed()
+    );
+    assert!(!out.join("session.toml").exists());
+    drop(data_m);
+}
+
+#[test]
+fn configuring_the_radar_needs_its_cli_port_and_cfg() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = RecordConfig {
+        out: dir.path().join("rec"),
+        radar: Some(RadarPorts {
+            data: "/dev/null".into(),
+            data_baud: 921_600,
+            cli: None,
+            cfg: None,
+        }),
+        configure: true,
+        ..RecordConfig::default()
+    };
+    let e = record(&cfg, &Arc::new(Live::default())).unwrap_err();
+    assert!(e.to_string().contains("--radar-cli"), "{e}");
+}

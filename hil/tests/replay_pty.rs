@@ -445,3 +445,36 @@ fn bad_options_are_refused_with_their_name() {
     let e = replay(schedules, vec![], &o).unwrap_err();
     assert!(e.to_string().contains("--corrupt"), "{e}");
 }
+
+#[test]
+fn a_pty_nobody_reads_is_reported_blocked_and_ctrl_c_still_stops() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = synthetic_session(&dir.path().join("s"), 20.0);
+    let s = Session::open(&session).unwrap();
+    let schedules = schedule::build(&s, None, None).unwrap();
+    let sinks = vec![
+        Sink::pty(StreamKind::Radar).unwrap(),
+        Sink::pty(StreamKind::Imu).unwrap(),
+    ];
+    let (tx, rx) = crossbeam_channel::unbounded();
+    let mut o = opts(Pacing::Fast);
+    o.notify = Some(tx);
+    let stop = o.stop.clone();
+    let watcher = thread::spawn(move || {
+        let n = rx.recv_timeout(Duration::from_secs(10));
+        stop.store(true, Ordering::SeqCst);
+        n
+    });
+    let t = Instant::now();
+    let (report, _sinks) = replay(schedules, sinks, &o).unwrap();
+    let notice = watcher.join().unwrap().expect("a notice");
+    let Notice::Blocked { stream, path } = notice else {
+        panic!("{notice:?}")
+    };
+    assert!(report.stopped);
+    let r = report.stream(stream).unwrap();
+    assert_eq!(r.path, path);
+    assert!(r.bytes_written < stream_bytes(&session, stream).len() as u64);
+    assert!(r.blocked_ns >= 1_000_000_000);
+    assert!(t.elapsed() < Duration::from_secs(5), "{:?}", t.elapsed());
+}
