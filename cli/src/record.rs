@@ -55,8 +55,11 @@ pub fn run(a: RecordArgs) -> Result<(), Box<dyn std::error::Error>> {
         None => None,
     };
     let stop = Arc::new(AtomicBool::new(false));
-    signal_hook::flag::register(signal_hook::consts::SIGINT, stop.clone())?;
-    signal_hook::flag::register(signal_hook::consts::SIGTERM, stop.clone())?;
+    // First Ctrl-C/SIGTERM: a flag the loops poll (clean shutdown); a second one exits at once.
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register_conditional_shutdown(sig, 130, stop.clone())?;
+        signal_hook::flag::register(sig, stop.clone())?;
+    }
     let duration =
         match a.duration {
             Some(d) if d > 0.0 => Some(Duration::try_from_secs_f64(d).map_err(|_| {

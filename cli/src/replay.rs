@@ -102,8 +102,11 @@ pub fn run(a: ReplayArgs) -> Result<(), Box<dyn std::error::Error>> {
     seconds("--linger", a.linger)?;
 
     let stop = Arc::new(AtomicBool::new(false));
-    signal_hook::flag::register(signal_hook::consts::SIGINT, stop.clone())?;
-    signal_hook::flag::register(signal_hook::consts::SIGTERM, stop.clone())?;
+    // First Ctrl-C/SIGTERM: a flag the loops poll (clean shutdown); a second one exits at once.
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register_conditional_shutdown(sig, 130, stop.clone())?;
+        signal_hook::flag::register(sig, stop.clone())?;
+    }
 
     let devices = a.radar_dev.is_some() || a.imu_dev.is_some();
     let mut sinks = Vec::new();
@@ -156,6 +159,9 @@ pub fn run(a: ReplayArgs) -> Result<(), Box<dyn std::error::Error>> {
         eprintln!("press Enter to start");
         let mut line = String::new();
         std::io::stdin().lock().read_line(&mut line)?;
+        if stopped() {
+            return Err("stopped before the start".into());
+        }
     }
     wait(seconds("--start-delay", a.start_delay)?, &stopped);
 

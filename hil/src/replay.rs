@@ -101,7 +101,7 @@ pub struct StreamReport {
     pub timing: Timing,
     /// UART rate the bytes were paced at \[bit/s\].
     pub baud: u32,
-    /// Session bytes replayed (before faults) \[B\].
+    /// Session bytes of the pieces written completely (before faults) \[B\].
     pub bytes_session: u64,
     /// Bytes written to the sink (after faults) \[B\].
     pub bytes_written: u64,
@@ -170,6 +170,9 @@ pub fn replay(
             })?;
         jobs.push((s, sinks.swap_remove(i)));
     }
+    // One pass length for all streams, so --loop keeps radar and IMU aligned pass after pass.
+    let pass_len = jobs.iter().map(|(s, _)| s.end_ns()).max().unwrap_or(0)
+        + (opts.pass_gap_s.max(0.0) * 1e9) as u64;
     let t0 = Instant::now() + Duration::from_millis(20);
     let failed = Arc::new(AtomicBool::new(false));
     let handles: Vec<_> = jobs
@@ -180,7 +183,7 @@ pub fn replay(
             thread::Builder::new()
                 .name(format!("replay-{}", s.kind.name()))
                 .spawn(move || {
-                    let r = run_stream(&s, sink, &opts, t0, &failed);
+                    let r = run_stream(&s, sink, &opts, t0, pass_len, &failed);
                     if r.is_err() {
                         failed.store(true, Ordering::SeqCst);
                     }
@@ -240,6 +243,7 @@ fn run_stream(
     mut sink: Sink,
     opts: &ReplayOptions,
     t0: Instant,
+    pass_len: u64,
     failed: &AtomicBool,
 ) -> Result<(StreamReport, Sink), HilError> {
     let stop = || opts.stop.load(Ordering::Relaxed) || failed.load(Ordering::Relaxed);
@@ -254,7 +258,6 @@ fn run_stream(
     let slice = usize::try_from(u64::from(s.baud) / 10 / 500)
         .unwrap_or(1)
         .max(16);
-    let pass_len = s.end_ns() + (opts.pass_gap_s.max(0.0) * 1e9) as u64;
     let mut rep = StreamReport {
         stream: s.kind,
         path: sink.path().to_string(),
@@ -325,7 +328,6 @@ fn run_stream(
                 &s.frame_starts,
                 &mut wire,
             );
-            rep.bytes_session += bytes.len() as u64;
             let due_end = t + shift;
             let tx = uart_ns(wire.len() as u64, s.baud);
             let start = due_end.saturating_sub(tx).max(wire_end);
@@ -366,6 +368,7 @@ fn run_stream(
                     last_drain = Instant::now();
                 }
             }
+            rep.bytes_session += bytes.len() as u64;
         }
         pass += 1;
         rep.passes = pass;
