@@ -149,8 +149,8 @@ fn capture_excerpt_at_real_time_yields_the_files_frames() {
             mean * 1e3,
             max * 1e3
         );
-        // Generous: the order of a scheduler tick, not a frame period.
-        assert!(max < 0.05, "{name}: arrival off the schedule by {max} s");
+        // Generous (CI shares two cores): well under the radar frame period.
+        assert!(max < 0.08, "{name}: arrival off the schedule by {max} s");
     }
     // Paced, not fast: the replay takes the session's time (generous bounds).
     assert!(o.wall >= end.mul_f64(0.9), "{:?} < {:?}", o.wall, end);
