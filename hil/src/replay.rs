@@ -289,7 +289,10 @@ fn run_stream(
             let t = base + p.t_ns;
             while let Some(&(at, _)) = reopens.front().filter(|(at, _)| *at <= t) {
                 reopens.pop_front();
-                let _ = at;
+                // Close at the fault's time, not when the piece before it was written.
+                if scale.is_some() && !sleep_until(wall(at + shift), &stop) {
+                    break 'passes;
+                }
                 sink.reopen(opts.reopen_gap)?;
                 inj.counts.reopens += 1;
                 inj.log(pass, p.start, FaultKind::Reopen);
