@@ -23,19 +23,19 @@ pub struct RecordArgs {
     /// Radar chirp configuration to upload (saved as radar.cfg).
     #[arg(long)]
     radar_cfg: Option<PathBuf>,
-    /// Radar data port rate [bit/s].
+    /// Radar data port rate, in bit/s.
     #[arg(long, default_value_t = 921_600)]
     radar_baud: u32,
     /// IMU port.
     #[arg(long)]
     imu: Option<String>,
-    /// IMU port rate [bit/s].
+    /// IMU port rate, in bit/s.
     #[arg(long, default_value_t = 115_200)]
     imu_baud: u32,
-    /// IMU inertial output rate [Hz].
+    /// IMU inertial output rate, in Hz.
     #[arg(long, default_value_t = 100)]
     imu_rate: u16,
-    /// Stop after this long [s] (else at Ctrl-C).
+    /// Stop after this long, in s (else at Ctrl-C).
     #[arg(long)]
     duration: Option<f64>,
     /// Record without configuring the sensors (and without sensorStop/GoToConfig at the end).

@@ -32,10 +32,10 @@ pub struct ReplayArgs {
     /// Serial device for the IMU stream.
     #[arg(long)]
     imu_dev: Option<String>,
-    /// Radar UART rate [bit/s] (default: the session's, else 921600).
+    /// Radar UART rate, in bit/s (default: the session's, else 921600).
     #[arg(long)]
     baud_radar: Option<u32>,
-    /// IMU UART rate [bit/s] (default: the session's, else 115200).
+    /// IMU UART rate, in bit/s (default: the session's, else 115200).
     #[arg(long)]
     baud_imu: Option<u32>,
     /// Fraction of bytes to corrupt (XOR with a random non-zero value).
@@ -66,10 +66,10 @@ pub struct ReplayArgs {
     /// Start only after Enter is pressed.
     #[arg(long)]
     wait_enter: bool,
-    /// Wait this long before starting [s].
+    /// Wait this long before starting, in s.
     #[arg(long, default_value_t = 0.0)]
     start_delay: f64,
-    /// Keep the ptys open this long after the last byte, so readers get everything [s].
+    /// Keep the ptys open this long after the last byte, so readers get everything, in s.
     #[arg(long, default_value_t = 1.0)]
     linger: f64,
 }
