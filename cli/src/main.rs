@@ -13,6 +13,8 @@ mod odometry;
 mod output;
 mod pose;
 mod radar;
+mod record;
+mod replay;
 mod selftest;
 mod sim;
 
@@ -47,6 +49,10 @@ enum Command {
     Selftest(selftest::SelftestArgs),
     /// Simulate radar-inertial sessions with ground truth; the benchmark split.
     Sim(sim::SimArgs),
+    /// Replay a session into pseudo-terminals or serial devices (the HIL rig).
+    Replay(replay::ReplayArgs),
+    /// Record the radar and IMU ports into a session.
+    Record(record::RecordArgs),
 }
 
 fn main() -> ExitCode {
@@ -59,6 +65,8 @@ fn main() -> ExitCode {
         Command::Odometry(a) => odometry::run(a),
         Command::Selftest(a) => selftest::run(a),
         Command::Sim(args) => sim::run(args),
+        Command::Replay(args) => replay::run(args),
+        Command::Record(args) => record::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
