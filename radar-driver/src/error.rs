@@ -62,6 +62,15 @@ pub enum FrameError {
         /// Bytes after the last TLV \[B\].
         len: u32,
     },
+    /// The frame released just before ended inside the next frame's magic word: it lost `overlap`
+    /// bytes on the wire (a dropped byte that no checksum catches), so its content is shifted and
+    /// must be discarded. The next frame is framed from the recovered magic.
+    OverlapsNextFrame {
+        /// Bytes of the next magic the previous frame had taken in (1..=7).
+        overlap: u32,
+        /// Length of the retracted frame \[B\].
+        len: u32,
+    },
     /// The next frame's magic word appeared inside this frame's claimed length: the frame was cut
     /// short on the wire (or by the tool that saved it).
     Truncated {
@@ -73,7 +82,7 @@ pub enum FrameError {
 }
 
 /// Number of distinct [`FrameError`] kinds, for per-reason counters.
-pub const FRAME_ERROR_KINDS: usize = 9;
+pub const FRAME_ERROR_KINDS: usize = 10;
 
 impl FrameError {
     /// Stable index of this error's kind (0..[`FRAME_ERROR_KINDS`]).
@@ -88,6 +97,7 @@ impl FrameError {
             Self::BadTlvLength { .. } => 6,
             Self::TrailingBytes { .. } => 7,
             Self::Truncated { .. } => 8,
+            Self::OverlapsNextFrame { .. } => 9,
         }
     }
 
@@ -108,6 +118,7 @@ pub const FRAME_ERROR_NAMES: [&str; FRAME_ERROR_KINDS] = [
     "bad_tlv_length",
     "trailing_bytes",
     "truncated",
+    "overlaps_next_frame",
 ];
 
 impl fmt::Display for FrameError {
@@ -137,6 +148,10 @@ impl fmt::Display for FrameError {
             Self::TrailingBytes { len } => {
                 write!(f, "{len} B after the last TLV in a layout without padding")
             }
+            Self::OverlapsNextFrame { overlap, len } => write!(
+                f,
+                "the previous frame ({len} B) ended {overlap} B into the next frame's magic: it lost bytes on the wire, discard it"
+            ),
             Self::Truncated { claimed, got } => write!(
                 f,
                 "frame truncated: header claims {claimed} B, next magic (or end of stream) after {got} B"

@@ -63,6 +63,16 @@ impl Counters {
     }
 }
 
+/// What follows a released frame.
+enum TailCheck {
+    /// A magic word, junk, or nothing suspicious.
+    Normal,
+    /// Could be the rest of a magic word begun inside the frame: wait for more.
+    NeedMore,
+    /// The frame ended this many bytes into the next magic word.
+    Overlap(usize),
+}
+
 /// Result of looking at a window that may start with a frame.
 enum Step {
     /// `n` bytes at the start hold no magic (not even a prefix of one).
@@ -86,6 +96,11 @@ pub struct Framer<const N: usize> {
     last_layout: Option<Layout>,
     /// True when the last thing seen was a good frame (junk after it is a new loss of sync).
     in_sync: bool,
+    /// The last 7 bytes of the frame released last, and its length: if what follows it is the
+    /// rest of a magic word that began inside it, that frame was short on the wire.
+    tail: [u8; 7],
+    last_len: usize,
+    check_tail: bool,
     counters: Counters,
 }
 
@@ -108,6 +123,9 @@ impl<const N: usize> Framer<N> {
             },
             last_layout: None,
             in_sync: true,
+            tail: [0; 7],
+            last_len: 0,
+            check_tail: false,
             counters: Counters::default(),
         }
     }
@@ -159,6 +177,36 @@ impl<const N: usize> Framer<N> {
             self.release = 0;
         }
         loop {
+            if self.check_tail {
+                let from_buf = !self.buf.is_empty();
+                let w: &[u8] = if from_buf { &self.buf } else { input };
+                if w.is_empty() {
+                    return Poll::NeedMore;
+                }
+                match self.tail_check(w) {
+                    TailCheck::Normal => self.check_tail = false,
+                    TailCheck::NeedMore if from_buf => match input.split_first() {
+                        Some((&b, rest)) => {
+                            let _ = self.buf.push(b);
+                            *input = rest;
+                            self.consumed(1);
+                            continue;
+                        }
+                        None => return Poll::NeedMore,
+                    },
+                    TailCheck::NeedMore => {
+                        if input.is_empty() {
+                            return Poll::NeedMore;
+                        }
+                        let n = input.len().min(N);
+                        let _ = self.buf.extend_from_slice(&input[..n]);
+                        *input = &input[n..];
+                        self.consumed(n);
+                        continue;
+                    }
+                    TailCheck::Overlap(k) => return self.retract(k),
+                }
+            }
             if self.buf.is_empty() {
                 let window: &'i [u8] = input;
                 if window.is_empty() {
@@ -174,6 +222,7 @@ impl<const N: usize> Framer<N> {
                         *input = &window[len..];
                         self.consumed(len);
                         self.good(layout, len);
+                        self.keep_tail(&window[..len]);
                         return Poll::Frame(Frame::trusted(&window[..len], layout));
                     }
                     Step::Drop(error, n) => {
@@ -202,6 +251,10 @@ impl<const N: usize> Framer<N> {
                     Step::Frame(layout, len) => {
                         self.release = len;
                         self.good(layout, len);
+                        let mut t = [0u8; 7];
+                        let from = len.saturating_sub(7);
+                        t[7 - (len - from)..].copy_from_slice(&self.buf[from..len]);
+                        self.tail = t;
                         return Poll::Frame(Frame::trusted(&self.buf[..len], layout));
                     }
                     Step::Drop(error, n) => {
@@ -297,6 +350,60 @@ impl<const N: usize> Framer<N> {
         self.counters.bytes_ok += len as u64;
         self.last_layout = Some(layout);
         self.in_sync = true;
+        self.last_len = len;
+        self.check_tail = true;
+    }
+
+    fn keep_tail(&mut self, frame: &[u8]) {
+        let from = frame.len().saturating_sub(7);
+        let n = frame.len() - from;
+        self.tail = [0; 7];
+        self.tail[7 - n..].copy_from_slice(&frame[from..]);
+    }
+
+    /// Whether the bytes after the last released frame continue a magic word begun inside it.
+    fn tail_check(&self, w: &[u8]) -> TailCheck {
+        if w.first() == Some(&MAGIC[0]) {
+            return TailCheck::Normal;
+        }
+        let tail = &self.tail[7 - self.last_len.min(7)..];
+        for k in (1..=tail.len()).rev() {
+            if tail[tail.len() - k..] != MAGIC[..k] {
+                continue;
+            }
+            let rest = &MAGIC[k..];
+            let n = rest.len().min(w.len());
+            if w[..n] == rest[..n] {
+                return if n == rest.len() {
+                    TailCheck::Overlap(k)
+                } else {
+                    TailCheck::NeedMore
+                };
+            }
+        }
+        TailCheck::Normal
+    }
+
+    /// Takes back the last released frame: it ended `k` bytes into the next magic word.
+    fn retract<'r>(&mut self, k: usize) -> Poll<'r> {
+        self.check_tail = false;
+        let len = self.last_len;
+        self.counters.frames_ok -= 1;
+        self.counters.bytes_ok -= len as u64;
+        // The k magic bytes go back in front of what follows, for the next frame.
+        let mut restored: heapless::Vec<u8, N> = heapless::Vec::new();
+        let _ = restored.extend_from_slice(&MAGIC[..k]);
+        let keep = (N - k).min(self.buf.len());
+        let _ = restored.extend_from_slice(&self.buf[..keep]);
+        self.buf = restored;
+        self.scan.scanned = 0;
+        self.dropped(
+            FrameError::OverlapsNextFrame {
+                overlap: k as u32,
+                len: len as u32,
+            },
+            len - k,
+        )
     }
 
     fn dropped<'r>(&mut self, error: FrameError, skipped: usize) -> Poll<'r> {

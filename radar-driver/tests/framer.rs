@@ -339,3 +339,60 @@ fn finish_reports_a_trailing_partial_frame() {
     );
     assert_eq!(f.counters().bytes_skipped, wire.len() as u64 - 3);
 }
+
+#[test]
+fn a_byte_lost_inside_a_frame_is_caught_when_the_next_magic_arrives() {
+    // No checksum covers the payload: the short frame is released when its claimed length is in
+    // (it then ends inside the next magic word), and retracted as soon as the rest of that magic
+    // shows it overlapped; the next frame is still found.
+    for lost in 1..=7usize {
+        let first = oob(1, &[[1.0, 2.0, 3.0, 4.0]; 6]);
+        let mut wire = first.clone();
+        wire.drain(60..60 + lost);
+        wire.extend(oob(2, &[[5.0; 4]; 2]));
+        wire.extend(oob(3, &[]));
+        for chunk in [1, 3, 8, 100, 100_000] {
+            let mut f = F::default();
+            let out = feed_chunks(&mut f, wire.chunks(chunk));
+            assert_eq!(
+                out.frames,
+                vec![1, 2, 3],
+                "lost {lost}, chunk {chunk}: frame 1 is released first"
+            );
+            assert_eq!(
+                out.dropped,
+                vec![(
+                    FrameError::OverlapsNextFrame {
+                        overlap: lost as u32,
+                        len: first.len() as u32
+                    },
+                    first.len() - lost
+                )],
+                "lost {lost}, chunk {chunk}"
+            );
+            let c = f.counters();
+            assert_eq!(c.frames_ok, 2, "the retracted frame is not counted good");
+            assert_eq!(
+                c.frames_bad[FrameError::OverlapsNextFrame { overlap: 0, len: 0 }.kind_index()],
+                1
+            );
+            accounted(c, &f);
+            assert_eq!(c.bytes_in, wire.len() as u64);
+        }
+    }
+}
+
+#[test]
+fn a_frame_ending_in_magic_like_padding_is_not_retracted() {
+    // Padding that happens to end in 02 01 04 followed by a real magic: nothing to retract.
+    let mut b = FrameBuilder::oob(V3, P68, 1).points(&[[1.0; 4]]);
+    b.pad_byte = 0x02;
+    let mut wire = b.to_vec();
+    let n = wire.len();
+    wire[n - 3..].copy_from_slice(&[0x02, 0x01, 0x04]);
+    wire.extend(oob(2, &[]));
+    let mut f = F::default();
+    let out = feed_chunks(&mut f, wire.chunks(5));
+    assert_eq!(out.frames, vec![1, 2]);
+    assert!(out.dropped.is_empty());
+}

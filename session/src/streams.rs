@@ -95,6 +95,13 @@ pub fn radar_frames(session: &Session) -> Result<(Vec<RadarFrame>, StreamReport)
                         cloud: PointCloud::from_frame(&f, vres),
                     });
                 }
+                // The frame released just before lost bytes on the wire: take it back.
+                Poll::Dropped {
+                    error: radar_driver::FrameError::OverlapsNextFrame { .. },
+                    ..
+                } => {
+                    out.pop();
+                }
                 Poll::Dropped { .. } => {}
                 Poll::NeedMore => break,
             }

@@ -88,6 +88,12 @@ pub fn radar_frames_of(bytes: &[u8]) -> Vec<Vec<u8>> {
     loop {
         match f.poll(&mut input) {
             Poll::Frame(fr) => out.push(fr.as_bytes().to_vec()),
+            Poll::Dropped {
+                error: radar_driver::FrameError::OverlapsNextFrame { .. },
+                ..
+            } => {
+                out.pop();
+            }
             Poll::Dropped { .. } => {}
             Poll::NeedMore => break,
         }
@@ -157,7 +163,14 @@ pub fn read_radar(
                 seen.times.push(f.host_time);
                 last = Instant::now();
             }
-            Ok(Some(ReadEvent::Dropped { .. })) => last = Instant::now(),
+            Ok(Some(ReadEvent::Dropped { error, .. })) => {
+                // A retraction takes back the frame released just before.
+                if matches!(error, radar_driver::FrameError::OverlapsNextFrame { .. }) {
+                    seen.frames.pop();
+                    seen.times.pop();
+                }
+                last = Instant::now();
+            }
             Ok(Some(ReadEvent::Idle)) => {
                 if done() && last.elapsed() > idle {
                     break;
