@@ -7,6 +7,7 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+mod demo;
 mod eval;
 mod imu;
 mod odometry;
@@ -31,6 +32,8 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// The end-to-end job on a generated default: simulate, decode, run the estimators, score them.
+    Demo(demo::DemoArgs),
     /// TI mmWave radar: dump frames, upload a .cfg, show what a .cfg implies.
     #[command(subcommand)]
     Radar(radar::RadarCmd),
@@ -58,6 +61,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo(a) => demo::run(a),
         Command::Radar(cmd) => radar::run(cmd),
         Command::Imu(cmd) => imu::run(cmd),
         Command::Pose(cmd) => pose::run(cmd),

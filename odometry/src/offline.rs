@@ -38,7 +38,7 @@ impl Default for OfflineConfig {
             estimator: Estimator::Doppler,
             rio: RioConfig::default(),
             ego: EgoConfig::default(),
-            level_window_s: 0.2,
+            level_window_s: 1.0,
         }
     }
 }
