@@ -30,13 +30,17 @@ fn ate(
 
 #[test]
 fn doppler_rio_beats_dead_reckoning_by_far_on_simulated_walks() {
-    for (family, motion, seed) in [
-        (Family::Office, MotionKind::Handheld, 3),
-        (Family::Corridor, MotionKind::Robot, 5),
-    ] {
+    // (world, motion, seed, duration [s], at least this many times better than dead reckoning,
+    // ATE at most this share of the path). The slow planar robot gives Doppler the least to work
+    // with (its velocity is small against the Doppler noise).
+    let cases = [
+        (Family::Office, MotionKind::Handheld, 3, 20.0, 10.0, 0.03),
+        (Family::Corridor, MotionKind::Robot, 5, 40.0, 2.0, 0.04),
+    ];
+    for (family, motion, seed, duration, margin, share) in cases {
         let dir = tempfile::tempdir().unwrap();
         let mut sc = Scenario::new(family, motion, seed);
-        sc.duration_s = 20.0;
+        sc.duration_s = duration;
         simulate(&sc, dir.path(), &mut |_| {}).expect("simulate");
         let s = Session::open(dir.path()).unwrap();
         let (rio, path, r) = ate(&s, Estimator::Doppler);
@@ -52,10 +56,10 @@ fn doppler_rio_beats_dead_reckoning_by_far_on_simulated_walks() {
             "ego-velocity on at least 80% of frames"
         );
         assert!(
-            rio < (0.03 * path).max(0.25),
+            rio < (share * path).max(0.25),
             "RIO ATE {rio:.3} m over {path:.1} m"
         );
-        assert!(rio * 4.0 < dr, "RIO {rio:.3} m vs IMU-only {dr:.2} m");
+        assert!(rio * margin < dr, "RIO {rio:.3} m vs IMU-only {dr:.2} m");
         // The clock fits recover the simulated drift (ppm) of each sensor relative to the host.
         let truth = s.meta.clock.expect("clock truth");
         let fit_ppm = |rate: f64| (1.0 / rate - 1.0) * 1e6;
