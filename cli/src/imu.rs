@@ -190,6 +190,12 @@ fn dump_from<R: Read, const CAP: usize>(
             Ok(Some(e)) => e,
             Ok(None) => break,
             Err(e) if live && e.kind() == io::ErrorKind::TimedOut => continue,
+            // A port that goes away (cable pulled, replay rig closed) ends the dump; the summary
+            // of what was read still follows.
+            Err(e) if live => {
+                eprintln!("milliego: port closed: {e}");
+                break;
+            }
             Err(e) => return Err(e.into()),
         };
         let Event::Frame { frame, at } = event else {

@@ -224,9 +224,16 @@ fn dump(a: DumpArgs) -> Result<()> {
         open = output::line(&mut out, "frame,subframe,cpu_cycles,sensor_time_s,host_time_s,point,x,y,z,velocity,snr_db,noise_db")?;
     }
     while open && a.max_frames.is_none_or(|m| good < m) {
-        let ev = match reader.next_event()? {
-            Some(ev) => ev,
-            None => break,
+        let ev = match reader.next_event() {
+            Ok(Some(ev)) => ev,
+            Ok(None) => break,
+            // A port that goes away (cable pulled, replay rig closed) ends the dump; the summary
+            // of what was read still follows.
+            Err(e) if a.port.is_some() => {
+                eprintln!("milliego: {name}: port closed: {e}");
+                break;
+            }
+            Err(e) => return Err(e.into()),
         };
         let f = match ev {
             ReadEvent::Frame(f) => f,
