@@ -16,6 +16,7 @@ mod pose;
 mod radar;
 mod record;
 mod replay;
+mod score;
 mod selftest;
 mod sim;
 
@@ -42,6 +43,8 @@ enum Command {
     Imu(imu::ImuCmd),
     /// Classical odometry over a session (Doppler radar-inertial or IMU-only), written as TUM.
     Odometry(odometry::OdometryArgs),
+    /// Score every estimator on a set of the simulator's benchmark split (the paper's ATE table).
+    Score(score::ScoreArgs),
     /// Trajectory error of an estimate against ground truth (ATE, RPE, drift), as evo computes it.
     Eval(eval::EvalArgs),
     /// Pose link: listen to a pose stream (UDP or serial) and print or save it.
@@ -66,6 +69,7 @@ fn main() -> ExitCode {
         Command::Imu(cmd) => imu::run(cmd),
         Command::Pose(cmd) => pose::run(cmd),
         Command::Eval(a) => eval::run(a),
+        Command::Score(a) => score::run(a),
         Command::Odometry(a) => odometry::run(a),
         Command::Selftest(a) => selftest::run(a),
         Command::Sim(args) => sim::run(args),

@@ -41,7 +41,11 @@ pub struct Config {
     pub model: Model,
     /// Doppler noise of a static point \[m/s\] (about the velocity resolution / 2).
     pub sigma: f32,
-    /// Inlier threshold as a multiple of `sigma`.
+    /// Direction error of a point \[rad\] (angular resolution, cell merging): a point's radial
+    /// velocity is then off by about `|v| direction_sigma`, which adds to `sigma` in the
+    /// covariance of the estimate (not in the inlier gate, which would let ghosts in).
+    pub direction_sigma: f32,
+    /// Inlier threshold as a multiple of the effective noise.
     pub inlier_sigmas: f32,
     /// Minimum inliers to accept a solution.
     pub min_inliers: usize,
@@ -73,6 +77,7 @@ impl Default for Config {
             min_spread: 1e-3,
             min_range: 0.1,
             seed: 0x5EED,
+            direction_sigma: 0.3,
         }
     }
 }
@@ -237,6 +242,12 @@ impl EgoVelocityEstimator {
         }
 
         let thresh = f64::from(cfg.inlier_sigmas * cfg.sigma);
+        let k_sig = f64::from(cfg.inlier_sigmas);
+        let (s0, sd) = (f64::from(cfg.sigma), f64::from(cfg.direction_sigma));
+        // Inliers are chosen with the Doppler noise alone (a wider gate lets ghosts in); the
+        // direction errors enter the covariance.
+        let thresh_for = |_v: &Vector3<f64>| k_sig * s0;
+        let sigma_eff = |v: &Vector3<f64>| (s0 * s0 + (v.norm() * sd).powi(2)).sqrt();
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
         let mut best: Option<(usize, f64, Vector3<f64>)> = None;
         // A hypothesis from a minimal sample is itself uncertain by about the inlier threshold.
@@ -256,7 +267,7 @@ impl EgoVelocityEstimator {
             if cfg.model == Model::Planar {
                 v.z = 0.0;
             }
-            let (count, cost) = score(&self.dirs, &self.vr, &v, thresh);
+            let (count, cost) = score(&self.dirs, &self.vr, &v, thresh_for(&v));
             best = Some((count, cost, v));
         }
         let mut max_iter = cfg.max_iterations;
@@ -284,7 +295,7 @@ impl EgoVelocityEstimator {
             if !agrees(&v) {
                 continue;
             }
-            let (count, cost) = score(&self.dirs, &self.vr, &v, thresh);
+            let (count, cost) = score(&self.dirs, &self.vr, &v, thresh_for(&v));
             if best
                 .as_ref()
                 .is_none_or(|b| count > b.0 || (count == b.0 && cost < b.1))
@@ -324,8 +335,9 @@ impl EgoVelocityEstimator {
         let mut v = v0;
         let mut inl: Vec<usize> = Vec::new();
         for _ in 0..2 {
+            let th = thresh_for(&v);
             inl = (0..usable)
-                .filter(|&i| (self.vr[i] + self.dirs[i].dot(&v)).abs() <= thresh)
+                .filter(|&i| (self.vr[i] + self.dirs[i].dot(&v)).abs() <= th)
                 .collect();
             if inl.len() < dof {
                 break;
@@ -357,10 +369,11 @@ impl EgoVelocityEstimator {
             .map(|&i| (self.vr[i] + self.dirs[i].dot(&v)).powi(2))
             .sum();
         let rms = (ss / inl.len() as f64).sqrt();
-        // Noise: the residual spread, but never below the configured Doppler noise.
+        // Noise: the residual spread, but never below the Doppler noise plus what direction
+        // errors add at this speed.
         let sigma = (ss / (inl.len().saturating_sub(dof).max(1)) as f64)
             .sqrt()
-            .max(f64::from(cfg.sigma));
+            .max(sigma_eff(&v));
         let mut dtd = Matrix3::zeros();
         for &i in &inl {
             dtd += self.dirs[i] * self.dirs[i].transpose();

@@ -30,6 +30,10 @@ pub struct OfflineConfig {
     pub ego: EgoConfig,
     /// Time at the start used to level the attitude from gravity \[s\].
     pub level_window_s: f64,
+    /// Factor on the ego-velocity covariance before the filter takes it: the least-squares
+    /// covariance ignores direction errors (angular resolution) and ghost points that slip into
+    /// the consensus of a sparse frame.
+    pub velocity_cov_scale: f64,
 }
 
 impl Default for OfflineConfig {
@@ -39,6 +43,7 @@ impl Default for OfflineConfig {
             rio: RioConfig::default(),
             ego: EgoConfig::default(),
             level_window_s: 1.0,
+            velocity_cov_scale: 1.0,
         }
     }
 }
@@ -211,6 +216,7 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
     let mut outputs: Vec<f64> = Vec::new();
     let (q_ib, t_ib) = (q_bi.inverse(), -(q_bi.inverse() * t_bi));
     let mut dets = Vec::new();
+    let mut rejected_in_row = 0u32;
     for s in &imu {
         let t = imu_t(s.sensor_s);
         while next < radar_times.len() && radar_times[next].0 <= t {
@@ -228,8 +234,11 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
                 position: [p.x, p.y, p.z],
                 radial_velocity: p.velocity,
             }));
-            // Guide the consensus with the filter's prediction once the velocity is known.
-            let prior = (rio.counters().updates >= 10).then(|| {
+            // Guide the consensus with the filter's prediction once the velocity is known and
+            // the filter is healthy (its last frames were accepted): a diverged filter's prior
+            // would only keep rejecting the truth.
+            let healthy = rio.counters().updates >= 10 && rejected_in_row < 3;
+            let prior = healthy.then(|| {
                 let (velocity, covariance) = rio.predicted_radar_velocity();
                 Prior {
                     velocity,
@@ -241,7 +250,9 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
             match e.status {
                 Status::Ok => {
                     res.ego_ok += 1;
-                    let c = e.covariance.map(|r| r.map(f64::from));
+                    let c = e
+                        .covariance
+                        .map(|r| r.map(|x| f64::from(x) * cfg.velocity_cov_scale));
                     rio.push_velocity(VelocityMeasurement {
                         t: tr,
                         velocity: e.velocity.map(f64::from),
@@ -250,14 +261,24 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
                 }
                 Status::Degenerate { .. } => res.ego_degenerate += 1,
                 Status::TooFewPoints { .. } => res.ego_too_few += 1,
-                Status::NoConsensus { .. } => res.ego_no_consensus += 1,
+                Status::NoConsensus { .. } => {
+                    res.ego_no_consensus += 1;
+                    rejected_in_row += u32::from(healthy);
+                }
             }
         }
+        let before = *rio.counters();
         rio.push_imu(ImuSample {
             t,
             accel: s.accel,
             gyro: s.gyro,
         });
+        let after = rio.counters();
+        if after.updates > before.updates {
+            rejected_in_row = 0;
+        } else if after.gated > before.gated {
+            rejected_in_row += 1;
+        }
         for tr in outputs.drain(..) {
             let st = rio.state();
             // Body pose: T_wb = T_wi * T_ib.

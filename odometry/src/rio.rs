@@ -299,6 +299,10 @@ impl Rio {
     }
 
     fn update(&mut self, m: &VelocityMeasurement) {
+        self.update_gated(m, true);
+    }
+
+    fn update_gated(&mut self, m: &VelocityMeasurement, gate: bool) {
         let st = *self.nav.state();
         let (pred, h) = self.radar_model();
         let rm = Matrix3::from_fn(|i, j| m.covariance[i][j]);
@@ -309,7 +313,7 @@ impl Rio {
             return;
         };
         let d2 = (y.transpose() * si * y)[(0, 0)];
-        if !(d2.is_finite() && d2 <= self.cfg.gate) {
+        if gate && !(d2.is_finite() && d2 <= self.cfg.gate) {
             self.counters.gated += 1;
             self.gated_run += 1;
             if self.gated_run < self.cfg.reanchor_after || !d2.is_finite() {
@@ -318,17 +322,20 @@ impl Rio {
             // Re-anchor: forget what the velocity was believed to be, then take this measurement.
             self.counters.reanchors += 1;
             self.gated_run = 0;
-            let s2 = self.cfg.init_velocity_std * self.cfg.init_velocity_std;
-            for r in 0..15 {
-                for c in 3..6 {
-                    self.p[(r, c)] = 0.0;
-                    self.p[(c, r)] = 0.0;
+            // Tilt goes too: a tilt error leaks gravity into the velocity, which is what usually
+            // drove the run of rejections.
+            let sv = self.cfg.init_velocity_std * self.cfg.init_velocity_std;
+            let st = self.cfg.init_tilt_std * self.cfg.init_tilt_std;
+            for k in 3..8 {
+                for r in 0..15 {
+                    self.p[(r, k)] = 0.0;
+                    self.p[(k, r)] = 0.0;
                 }
+                self.p[(k, k)] = if k < 6 { sv } else { st };
             }
-            for k in 3..6 {
-                self.p[(k, k)] = s2;
-            }
-            return self.update(m);
+            // Taken without the gate: after a run of rejections the filter, not the radar, is
+            // the one to doubt.
+            return self.update_gated(m, false);
         }
         self.gated_run = 0;
         let k = self.p * h.transpose() * si;

@@ -47,9 +47,11 @@ fn frame(
     (dets, is_static)
 }
 
+/// The synthetic points have exact directions: no direction-error allowance.
 fn cfg() -> Config {
     Config {
         sigma: SIGMA,
+        direction_sigma: 0.0,
         ..Config::default()
     }
 }
