@@ -13,6 +13,9 @@ use std::path::PathBuf;
 
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
+/// Per session: ATE 3D mean, ATE 2D mean \[m\], final drift \[% of path\].
+type SessionScore = (f64, f64, f64);
+
 #[derive(Debug, Args)]
 pub struct ScoreArgs {
     /// Benchmark set: train, val or test (held out: unseen family and seeds).
@@ -40,7 +43,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         .take(a.limit.unwrap_or(usize::MAX))
         .collect();
     let estimators = [("imu", Estimator::ImuOnly), ("doppler", Estimator::Doppler)];
-    let mut per: Vec<(String, Vec<(f64, f64, f64)>)> = estimators
+    let mut per: Vec<(String, Vec<SessionScore>)> = estimators
         .iter()
         .map(|(n, _)| (n.to_string(), Vec::new()))
         .collect();
@@ -68,8 +71,8 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             out.push((rep.ate.mean, rep.ate_2d.mean, rep.final_drift_pct));
         }
     }
-    let summarise = |v: &[(f64, f64, f64)]| {
-        let pick = |f: fn(&(f64, f64, f64)) -> f64| Stats::of(&v.iter().map(f).collect::<Vec<_>>());
+    let summarise = |v: &[SessionScore]| {
+        let pick = |f: fn(&SessionScore) -> f64| Stats::of(&v.iter().map(f).collect::<Vec<_>>());
         (pick(|x| x.0), pick(|x| x.1), pick(|x| x.2))
     };
     if a.json {
