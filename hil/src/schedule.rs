@@ -101,15 +101,11 @@ pub fn build(
         let baud = baud_imu
             .or(session.meta.imu.as_ref().map(|m| m.baud))
             .unwrap_or(115_200);
-        let wrap = match session
+        let wrap = session
             .meta
             .imu
             .as_ref()
-            .map(|m| m.sample_time_wrap.as_str())
-        {
-            Some("day") => TimeWrap::Day,
-            _ => TimeWrap::Pow32,
-        };
+            .map_or(TimeWrap::Pow32, |m| m.time_wrap());
         out.push(build_stream(s, baud, |data| imu_frames(data, wrap))?);
     }
     Ok(out)

@@ -95,6 +95,16 @@ fn default_wrap() -> String {
     "u32".into()
 }
 
+impl ImuMeta {
+    /// The SampleTimeFine wrap `sample_time_wrap` names ("day": one day, else 2^32 ticks).
+    pub fn time_wrap(&self) -> imu_driver::TimeWrap {
+        match self.sample_time_wrap.as_str() {
+            "day" => imu_driver::TimeWrap::Day,
+            _ => imu_driver::TimeWrap::Pow32,
+        }
+    }
+}
+
 impl Default for ImuMeta {
     fn default() -> Self {
         ImuMeta {

@@ -127,15 +127,11 @@ pub fn imu_samples(session: &Session) -> Result<(Vec<ImuSample>, StreamReport), 
     let Some(stream) = &session.imu else {
         return Ok((Vec::new(), StreamReport::default()));
     };
-    let wrap = match session
+    let wrap = session
         .meta
         .imu
         .as_ref()
-        .map(|m| m.sample_time_wrap.as_str())
-    {
-        Some("day") => TimeWrap::Day,
-        _ => TimeWrap::Pow32,
-    };
+        .map_or(TimeWrap::Pow32, |m| m.time_wrap());
     decode_imu(stream, wrap)
 }
 
