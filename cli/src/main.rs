@@ -12,6 +12,7 @@ mod eval;
 mod imu;
 mod odometry;
 mod output;
+mod plot;
 mod pose;
 mod radar;
 mod record;
@@ -47,6 +48,9 @@ enum Command {
     Score(score::ScoreArgs),
     /// Trajectory error of an estimate against ground truth (ATE, RPE, drift), as evo computes it.
     Eval(eval::EvalArgs),
+    /// Figures (PNG/SVG): trajectory coloured by error, error over time, ATE CDF, a radar frame.
+    #[command(subcommand)]
+    Plot(plot::PlotCmd),
     /// Pose link: listen to a pose stream (UDP or serial) and print or save it.
     #[command(subcommand)]
     Pose(pose::PoseCmd),
@@ -69,6 +73,7 @@ fn main() -> ExitCode {
         Command::Imu(cmd) => imu::run(cmd),
         Command::Pose(cmd) => pose::run(cmd),
         Command::Eval(a) => eval::run(a),
+        Command::Plot(cmd) => plot::run(cmd),
         Command::Score(a) => score::run(a),
         Command::Odometry(a) => odometry::run(a),
         Command::Selftest(a) => selftest::run(a),

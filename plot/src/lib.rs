@@ -18,6 +18,7 @@
 #![warn(missing_docs)]
 
 use milliego_eval::{align, ape, associate, Align, EvalError, Trajectory};
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -29,6 +30,7 @@ use std::sync::OnceLock;
 
 mod colour;
 pub use colour::{doppler_colour, error_colour, GROUND_TRUTH, SERIES};
+pub use plotters::style::RGBColor;
 
 /// DejaVu Sans, subset (see `assets/LICENSE-DejaVu.txt`).
 static FONT: &[u8] = include_bytes!("../assets/DejaVuSans-subset.ttf");
@@ -745,58 +747,109 @@ impl Figure for Cdf<'_> {
     where
         DB::ErrorType: 'static,
     {
-        let (title, desc, tick) = text_sizes(root.dim_in_pixel().1);
-        let area = titled(root, "Cumulative distribution of ATE", title)?;
-        let emax = self
-            .sets
+        let (title, _, _) = text_sizes(root.dim_in_pixel().1);
+        let all = || self.sets.iter().flat_map(|s| s.1.iter().copied());
+        let emax = all().fold(0.0, f64::max).max(1e-3) * 1.05;
+        // Estimators a hundredfold apart would leave the better one a vertical line at zero:
+        // then the error axis is logarithmic, from the decade of the smallest typical error.
+        let typical: Vec<f64> = self.sets.iter().map(|s| percentile(s.1, 0.9)).collect();
+        let (tmin, tmax) = typical
             .iter()
-            .flat_map(|s| s.1.iter().copied())
-            .fold(0.0, f64::max)
-            .max(1e-3)
-            * 1.05;
-        let (margin, x_label, y_label) = layout(tick);
-        let mut chart = ChartBuilder::on(&area)
-            .margin(margin)
-            .x_label_area_size(x_label)
-            .y_label_area_size(y_label)
-            .build_cartesian_2d(0.0..emax, 0.0..1.0)?;
-        chart
-            .configure_mesh()
-            .x_desc("ATE [m]")
-            .y_desc("fraction of poses")
-            .label_style(("sans-serif", tick))
-            .axis_desc_style(("sans-serif", desc))
-            .x_label_formatter(&num)
-            .y_label_formatter(&num)
-            .light_line_style(WHITE.mix(0.0))
-            .bold_line_style(BLACK.mix(0.12))
-            .draw()?;
-        for (k, (name, errors)) in self.sets.iter().enumerate() {
-            let mut e = errors.to_vec();
-            e.sort_by(f64::total_cmp);
-            let n = e.len() as f64;
-            // Step function: the fraction jumps to (i + 1) / n at the i-th smallest error.
-            let mut pts = vec![(0.0, 0.0)];
-            for (i, &x) in e.iter().enumerate() {
-                pts.push((x, i as f64 / n));
-                pts.push((x, (i + 1) as f64 / n));
-            }
-            pts.push((emax, 1.0));
-            let style = SERIES[k % SERIES.len()].stroke_width(3);
-            chart
-                .draw_series(LineSeries::new(pts, style))?
-                .label(format!("{name} (RMSE {:.3} m)", rmse(errors)))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
+            .fold((f64::MAX, 0.0f64), |(a, b), &t| (a.min(t), b.max(t)));
+        if tmin > 0.0 && tmax / tmin > 30.0 {
+            let floor = all().filter(|&e| e > 0.0).fold(tmin, f64::min);
+            let lo = 10f64.powf(floor.log10().floor()).max(emax * 1e-6);
+            let area = titled(
+                root,
+                "Cumulative distribution of ATE (log error axis)",
+                title,
+            )?;
+            cdf_chart(&area, (lo..emax).log_scale(), lo, emax, self.sets)
+        } else {
+            let area = titled(root, "Cumulative distribution of ATE", title)?;
+            cdf_chart(&area, 0.0..emax, 0.0, emax, self.sets)
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .label_font(("sans-serif", tick))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK.mix(0.4))
-            .draw()?;
-        Ok(())
     }
+}
+
+/// The `q` quantile of `e` (nearest rank), 0 when empty.
+fn percentile(e: &[f64], q: f64) -> f64 {
+    let mut v = e.to_vec();
+    v.sort_by(f64::total_cmp);
+    let i = ((v.len() as f64 * q).ceil() as usize).clamp(1, v.len().max(1)) - 1;
+    v.get(i).copied().unwrap_or(0.0)
+}
+
+/// The CDF lines on an error axis `x` from `lo` to `hi` \[m\] (linear or logarithmic).
+fn cdf_chart<DB: DrawingBackend, X>(
+    area: &DrawingArea<DB, Shift>,
+    x: X,
+    lo: f64,
+    hi: f64,
+    sets: &[(&str, &[f64])],
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+    X: AsRangedCoord<Value = f64>,
+    X::CoordDescType: ValueFormatter<f64>,
+{
+    let (_, desc, tick) = text_sizes(area.dim_in_pixel().1);
+    let (margin, x_label, y_label) = layout(tick);
+    let mut chart = ChartBuilder::on(area)
+        .margin(margin)
+        .x_label_area_size(x_label)
+        .y_label_area_size(y_label)
+        .build_cartesian_2d(x, 0.0..1.0)?;
+    chart
+        .configure_mesh()
+        .x_desc("ATE [m]")
+        .y_desc("fraction of poses")
+        .label_style(("sans-serif", tick))
+        .axis_desc_style(("sans-serif", desc))
+        .x_label_formatter(&num)
+        .y_label_formatter(&num)
+        .light_line_style(WHITE.mix(0.0))
+        .bold_line_style(BLACK.mix(0.12))
+        .draw()?;
+    for (k, (name, errors)) in sets.iter().enumerate() {
+        let mut e: Vec<f64> = errors.iter().map(|&x| x.max(lo)).collect();
+        e.sort_by(f64::total_cmp);
+        let n = e.len() as f64;
+        // Step function: the fraction jumps to (i + 1) / n at the i-th smallest error.
+        let mut pts = vec![(lo, 0.0)];
+        for (i, &x) in e.iter().enumerate() {
+            pts.push((x, i as f64 / n));
+            pts.push((x, (i + 1) as f64 / n));
+        }
+        pts.push((hi, 1.0));
+        let style = SERIES[k % SERIES.len()].stroke_width(2);
+        chart
+            .draw_series(LineSeries::new(pts, style))?
+            .label(format!("{name} (RMSE {} m)", sig3(rmse(errors))))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .label_font(("sans-serif", tick))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.4))
+        .draw()?;
+    Ok(())
+}
+
+/// Three significant digits, at most three decimals: 0.104, 1.23, 151.
+fn sig3(v: f64) -> String {
+    let digits = if v.abs() >= 100.0 {
+        0
+    } else if v.abs() >= 10.0 {
+        1
+    } else if v.abs() >= 1.0 {
+        2
+    } else {
+        3
+    };
+    format!("{v:.digits$}")
 }
 
 /// Cumulative distribution of ATE for one or more estimators on the same axes (the paper's figure:
@@ -865,7 +918,7 @@ impl Figure for Radar<'_> {
         let mut k = 1.0;
         while k * step <= r + 1e-9 {
             let rr = k * step;
-            // About 2 m of arc per segment at the outer ring: sub-pixel segments draw as dots.
+            // One segment per degree on the outer ring, fewer inside: sub-pixel segments look dotted.
             let n = ((180.0 * rr / r).round() as u32).max(24);
             let arc = (0..=n).map(|d| {
                 let a = std::f64::consts::PI * f64::from(d) / f64::from(n);

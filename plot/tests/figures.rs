@@ -4,10 +4,10 @@
 use milliego_eval::{Align, Trajectory};
 use milliego_plot::{
     ate_cdf, doppler_colour, error_colour, error_over_time, radar_frame, trajectory_top_view,
-    Matched, RadarPoint, GROUND_TRUTH, SERIES,
+    Matched, RGBColor, RadarPoint, GROUND_TRUTH, SERIES,
 };
 use nalgebra::{UnitQuaternion, Vector3};
-use plotters::style::RGBColor;
+
 use std::path::Path;
 
 const SIZE: (u32, u32) = (900, 700);
@@ -201,6 +201,14 @@ fn cdf_png_and_svg() {
     assert!(svg.contains("doppler (RMSE"));
     assert!(svg.contains("imu (RMSE"));
     assert!(svg.contains("fraction of poses"));
+    assert!(!svg.contains("log error axis"));
+
+    // A thousandfold apart: the error axis turns logarithmic so the better line is readable.
+    let c: Vec<f64> = a.iter().map(|x| x * 1000.0).collect();
+    let far = [("doppler", a.as_slice()), ("imu", c.as_slice())];
+    let log_path = dir.path().join("cdf_log.svg");
+    ate_cdf(&far, &log_path, SIZE).unwrap();
+    assert!(svg_text(&log_path).contains("Cumulative distribution of ATE (log error axis)"));
 }
 
 #[test]
