@@ -189,7 +189,8 @@ fn radar(a: RadarArgs) -> Result<()> {
     if !frame.cloud.velocity_known {
         title.push_str(" (Doppler unknown: no .cfg)");
     }
-    radar_frame(&points, &title, &a.out, (1100, 700))?;
+    // About 2:1 like the half-disc of range rings, so little of the figure is empty.
+    radar_frame(&points, &title, &a.out, (1200, 680))?;
     println!("wrote {} ({title})", a.out.display());
     Ok(())
 }

@@ -416,13 +416,14 @@ where
         .margin_top(margin)
         .margin_bottom(margin + x_label)
         .margin_left(8)
-        .margin_right(4)
-        .set_label_area_size(LabelAreaPosition::Right, (tick * 4.6) as u32)
+        .margin_right((tick * 1.2) as u32)
+        .set_label_area_size(LabelAreaPosition::Right, (tick * 5.0) as u32)
         .build_cartesian_2d(0.0..1.0, lo..hi)?;
     chart
         .configure_mesh()
         .disable_mesh()
         .disable_x_axis()
+        .set_all_tick_mark_size((tick * 0.4) as u32)
         .y_labels(8)
         .y_desc(desc)
         .y_label_formatter(&num)
@@ -493,7 +494,7 @@ fn split_for_bar<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
 ) -> (DrawingArea<DB, Shift>, DrawingArea<DB, Shift>) {
     let (w, h) = area.dim_in_pixel();
-    let bar = (text_sizes(h).2 * 7.0) as u32;
+    let bar = (text_sizes(h).2 * 8.0) as u32;
     area.split_horizontally(w.saturating_sub(bar))
 }
 

@@ -12,15 +12,19 @@ use std::path::Path;
 
 const SIZE: (u32, u32) = (900, 700);
 
-/// Columns left of the colour bar strip (7 tick-label heights, 98 px at this size).
-const PLOT_X: u32 = SIZE.0 - 100;
+/// Columns left of the colour bar strip (8 tick-label heights, 112 px at this size).
+const PLOT_X: u32 = SIZE.0 - 115;
 
 /// A scratch directory; with `MILLIEGO_PLOT_KEEP=DIR` the figures stay in DIR to be looked at.
-struct Out(Option<tempfile::TempDir>, std::path::PathBuf);
+struct Out {
+    /// Kept alive so the directory lasts the test; `None` when keeping.
+    _temp: Option<tempfile::TempDir>,
+    dir: std::path::PathBuf,
+}
 
 impl Out {
     fn path(&self) -> &Path {
-        &self.1
+        &self.dir
     }
 }
 
@@ -29,12 +33,17 @@ fn tempdir_or_keep(name: &str) -> Out {
         Some(d) => {
             let p = Path::new(&d).join(name);
             std::fs::create_dir_all(&p).unwrap();
-            Out(None, p)
+            Out {
+                _temp: None,
+                dir: p,
+            }
         }
         None => {
             let t = tempfile::tempdir().unwrap();
-            let p = t.path().to_path_buf();
-            Out(Some(t), p)
+            Out {
+                dir: t.path().to_path_buf(),
+                _temp: Some(t),
+            }
         }
     }
 }
