@@ -166,14 +166,17 @@ fn radar(a: RadarArgs) -> Result<()> {
             .max_by_key(|f| f.cloud.points.len())
             .ok_or_else(|| at(&"no radar frames"))?,
     };
+    let all = frame.cloud.points.len();
+    // A corrupt float in a frame must not cost the whole figure: such points are counted instead.
     let points: Vec<RadarPoint> = frame
         .cloud
         .points
         .iter()
+        .filter(|p| p.x.is_finite() && p.y.is_finite())
         .map(|p| RadarPoint {
             x: f64::from(p.x),
             y: f64::from(p.y),
-            velocity: if frame.cloud.velocity_known {
+            velocity: if frame.cloud.velocity_known && p.velocity.is_finite() {
                 f64::from(p.velocity)
             } else {
                 0.0
@@ -186,6 +189,9 @@ fn radar(a: RadarArgs) -> Result<()> {
         frame.frame_number,
         points.len()
     );
+    if points.len() < all {
+        title.push_str(&format!(" ({} non-finite dropped)", all - points.len()));
+    }
     if !frame.cloud.velocity_known {
         title.push_str(" (Doppler unknown: no .cfg)");
     }

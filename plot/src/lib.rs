@@ -347,8 +347,12 @@ fn rmse(e: &[f64]) -> f64 {
     (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt()
 }
 
-/// Bounds of `pts` padded by `pad` (fraction of the larger span), never degenerate.
-fn bounds(pts: impl IntoIterator<Item = (f64, f64)>, pad: f64) -> ((f64, f64), (f64, f64)) {
+/// Bounds of `pts` padded by `pad` (fraction of the larger span, itself at least `min_span`).
+fn bounds(
+    pts: impl IntoIterator<Item = (f64, f64)>,
+    pad: f64,
+    min_span: f64,
+) -> ((f64, f64), (f64, f64)) {
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for (x, y) in pts {
         x0 = x0.min(x);
@@ -359,9 +363,12 @@ fn bounds(pts: impl IntoIterator<Item = (f64, f64)>, pad: f64) -> ((f64, f64), (
     if x0 > x1 {
         return ((-1.0, 1.0), (-1.0, 1.0));
     }
-    let span = (x1 - x0).max(y1 - y0).max(1e-3);
-    let p = span * pad;
-    ((x0 - p, x1 + p), (y0 - p, y1 + p))
+    let span = (x1 - x0).max(y1 - y0);
+    let p = span.max(min_span) * pad;
+    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+    let half = |a: f64| (a.max(min_span) / 2.0) + p;
+    let (hx, hy) = (half(x1 - x0), half(y1 - y0));
+    ((cx - hx, cx + hx), (cy - hy, cy + hy))
 }
 
 /// Widens one of the ranges so that a metre is as many pixels along x as along y.
@@ -520,7 +527,7 @@ impl Figure for TopView<'_> {
         let area = titled(root, &text, title)?;
         let (left, right) = split_for_bar(&area);
         let pts = self.gt.p.iter().chain(&self.est.p).map(|p| (p.x, p.y));
-        let mut chart = equal_chart(&left, bounds(pts, 0.05), tick, false)?;
+        let mut chart = equal_chart(&left, bounds(pts, 0.05, 1.0), tick, false)?;
         chart
             .configure_mesh()
             .x_desc("x [m]")
@@ -546,9 +553,17 @@ impl Figure for TopView<'_> {
             .iter()
             .copied()
             .fold(f64::NEG_INFINITY, f64::max);
-        // A flat error (to rounding) takes the middle of the map rather than both of its ends.
+        // A flat error (to rounding) gets a bar of +-10 % around it (not below zero), so it takes
+        // the middle of the map rather than both of its ends.
         let flat = hi - lo <= 1e-9 * hi.abs().max(1.0);
-        let norm = |e: f64| if flat { 0.5 } else { (e - lo) / (hi - lo) };
+        let (lo, hi) = if flat {
+            let d = 0.1 * lo.max(0.01);
+            let b0 = (lo - d).max(0.0);
+            (b0, b0 + 2.0 * d)
+        } else {
+            (lo, hi)
+        };
+        let norm = |e: f64| (e - lo) / (hi - lo);
         let width = (tick / 5.0).max(1.0) as u32 + 1;
         let est_legend = error_colour(0.5).stroke_width(width);
         chart
@@ -596,8 +611,6 @@ impl Figure for TopView<'_> {
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK.mix(0.4))
             .draw()?;
-        let d = 0.1 * lo.max(0.01);
-        let (lo, hi) = if flat { (lo - d, lo + d) } else { (lo, hi) };
         colour_bar(&right, (lo, hi), error_colour, "ATE [m]", tick)
     }
 }

@@ -315,3 +315,32 @@ fn bad_inputs_name_the_file() {
         "{s}"
     );
 }
+
+#[test]
+fn single_pose_and_far_away_values_draw() {
+    let dir = tempdir_or_keep("single_pose_and_far_away_values_draw");
+    let mut one = ground_truth();
+    one.t.truncate(1);
+    one.p.truncate(1);
+    one.q.truncate(1);
+    let m = Matched::new(&one, &one, Align::None, 0.01).unwrap();
+    trajectory_top_view(
+        &m.gt,
+        &m.est,
+        &m.errors,
+        "one",
+        &dir.path().join("one.png"),
+        SIZE,
+    )
+    .unwrap();
+    error_over_time(&m.gt, &m.est, "one", &dir.path().join("one_err.png"), SIZE).unwrap();
+    ate_cdf(&[("zero", &[0.0])], &dir.path().join("zero.png"), SIZE).unwrap();
+    let far = [RadarPoint {
+        x: 1e12,
+        y: -1e12,
+        velocity: 1e9,
+    }];
+    radar_frame(&far, "far", &dir.path().join("far.png"), SIZE).unwrap();
+    // A figure the SVG size limits allow at its largest and smallest.
+    radar_frame(&far, "small", &dir.path().join("small.svg"), (300, 300)).unwrap();
+}
