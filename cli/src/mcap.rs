@@ -40,7 +40,10 @@ pub fn run(a: McapArgs) -> Result<()> {
     };
     let s = export(&session, &estimates, &a.out, &opts)
         .map_err(|e| format!("{} -> {}: {e}", a.session.display(), a.out.display()))?;
-    println!("{:<24} {:<32} {:>9} {:>12}", "topic", "type", "messages", "bytes");
+    println!(
+        "{:<24} {:<32} {:>9} {:>12}",
+        "topic", "type", "messages", "bytes"
+    );
     for t in &s.topics {
         println!(
             "{:<24} {:<32} {:>9} {:>12}",
@@ -55,7 +58,11 @@ pub fn run(a: McapArgs) -> Result<()> {
         s.path.display(),
         s.messages(),
         s.file_bytes,
-        if a.no_compress { "uncompressed" } else { "zstd" }
+        if a.no_compress {
+            "uncompressed"
+        } else {
+            "zstd"
+        }
     );
     println!(
         "radar: {} frames, {} rejected by the framer, {} without a time (not exported); imu: {} messages, {} rejected, {} not samples",

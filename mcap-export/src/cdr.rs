@@ -20,7 +20,10 @@ impl std::fmt::Display for CdrError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             CdrError::TooLong { what, len } => {
-                write!(f, "{what} of {len} elements does not fit a CDR uint32 length")
+                write!(
+                    f,
+                    "{what} of {len} elements does not fit a CDR uint32 length"
+                )
             }
         }
     }
@@ -63,7 +66,7 @@ impl CdrWriter {
 
     /// Pads with zeros to a multiple of `n` bytes from the start of the body.
     fn align(&mut self, n: usize) {
-        while self.body_len() % n != 0 {
+        while !self.body_len().is_multiple_of(n) {
             self.buf.push(0);
         }
     }

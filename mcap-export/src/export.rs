@@ -5,8 +5,7 @@
 //! followed by a summary section with chunk and message indexes.
 
 use crate::msg::{
-    Header, Imu, Odometry, PointCloud2, Pose, PoseStamped, RosMessage, TfMessage,
-    TransformStamped,
+    Header, Imu, Odometry, PointCloud2, Pose, PoseStamped, RosMessage, TfMessage, TransformStamped,
 };
 use crate::CdrError;
 use mcap::records::{MessageHeader, Metadata};
@@ -297,7 +296,8 @@ fn twist(poses: &[TumPose], i: usize) -> ([f64; 3], [f64; 3]) {
     let (a, b) = (i.saturating_sub(1), (i + 1).min(poses.len() - 1));
     let (pa, pb) = (&poses[a], &poses[b]);
     let dt = pb.t - pa.t;
-    if !(dt > 0.0) {
+    // Also catches a NaN difference.
+    if dt.is_nan() || dt <= 0.0 {
         return ([0.0; 3], [0.0; 3]);
     }
     let v = [
@@ -521,7 +521,10 @@ pub fn export(
         name: "milliego".into(),
         metadata: BTreeMap::from([
             ("session".into(), session.dir.display().to_string()),
-            ("time_base".into(), "session host clock [s] * 1e9 + time_offset_ns".into()),
+            (
+                "time_base".into(),
+                "session host clock [s] * 1e9 + time_offset_ns".into(),
+            ),
             ("time_offset_ns".into(), ns(shift_s).to_string()),
             ("time_offset_s".into(), offset_s),
             ("clock_unsynced".into(), clock.unsynced().to_string()),
@@ -548,4 +551,3 @@ pub fn export(
         log_time_range_ns: range,
     })
 }
-

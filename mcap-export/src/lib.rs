@@ -4,7 +4,7 @@
 //! extrinsics (`/tf_static`, `tf2_msgs/msg/TFMessage`), all on the session host clock.
 //!
 //! Layers: [`cdr`] writes CDR payloads (XCDR1, little-endian), [`msg`] holds the message structs
-//! and their `ros2msg` schema texts, [`export`] decodes a session, puts every stream on one time
+//! and their `ros2msg` schema texts, [`mod@export`] decodes a session, puts every stream on one time
 //! base and writes the MCAP file with the `mcap` crate. `docs/mcap.md` lists topics, frames and
 //! limits.
 

@@ -70,7 +70,12 @@ macro_rules! def {
     };
 }
 
-def!(TIME, "builtin_interfaces/Time", [], "int32 sec\nuint32 nanosec\n");
+def!(
+    TIME,
+    "builtin_interfaces/Time",
+    [],
+    "int32 sec\nuint32 nanosec\n"
+);
 def!(
     HEADER,
     "std_msgs/Header",
@@ -522,8 +527,12 @@ mod tests {
                 "{name} once in the Odometry schema"
             );
         }
-        assert!(PointCloud2::schema_text().contains("MSG: sensor_msgs/PointField\nuint8 INT8 = 1\n"));
-        assert!(TfMessage::schema_text().starts_with("geometry_msgs/TransformStamped[] transforms\n"));
+        assert!(
+            PointCloud2::schema_text().contains("MSG: sensor_msgs/PointField\nuint8 INT8 = 1\n")
+        );
+        assert!(
+            TfMessage::schema_text().starts_with("geometry_msgs/TransformStamped[] transforms\n")
+        );
         assert!(Imu::schema_text().contains("float64[9] orientation_covariance\n"));
     }
 }

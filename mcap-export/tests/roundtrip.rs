@@ -40,7 +40,11 @@ fn counts_and_times(bytes: &[u8]) -> (BTreeMap<String, u64>, Vec<u64>) {
         let m = m.expect("a readable message");
         *counts.entry(m.channel.topic.clone()).or_insert(0) += 1;
         assert_eq!(m.channel.message_encoding, "cdr");
-        let schema = m.channel.schema.as_ref().expect("every channel has a schema");
+        let schema = m
+            .channel
+            .schema
+            .as_ref()
+            .expect("every channel has a schema");
         assert_eq!(schema.encoding, "ros2msg");
         assert_eq!(&m.data[..4], &[0, 1, 0, 0], "CDR_LE encapsulation");
         assert_eq!(m.log_time, m.publish_time);
@@ -117,7 +121,10 @@ fn export_reads_back_with_the_mcap_crate() {
             .collect();
         assert_eq!(summed, want, "the summary counts what was written");
         assert!(times.windows(2).all(|w| w[0] <= w[1]), "log times in order");
-        assert_eq!(s.log_time_range_ns, Some((times[0], *times.last().unwrap())));
+        assert_eq!(
+            s.log_time_range_ns,
+            Some((times[0], *times.last().unwrap()))
+        );
         // Seekable: a summary with statistics, chunk indexes and message indexes.
         let summary = Summary::read(&bytes).unwrap().expect("summary section");
         let stats = summary.stats.as_ref().expect("statistics");

@@ -6,9 +6,7 @@
 use crate::ego_velocity::{Config as EgoConfig, Detection, EgoVelocityEstimator, Prior, Status};
 use crate::rio::{RadarMount, Rio, RioConfig, VelocityMeasurement};
 use crate::strapdown::ImuSample;
-use milliego_session::streams::{
-    imu_samples, radar_frames, ClockFit, SessionClock, StreamReport,
-};
+use milliego_session::streams::{imu_samples, radar_frames, ClockFit, SessionClock, StreamReport};
 use milliego_session::{Extrinsic, Session, SessionError, TumPose};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
