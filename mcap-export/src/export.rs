@@ -551,3 +551,43 @@ pub fn export(
         log_time_range_ns: range,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn topic_names_from_file_stems() {
+        assert_eq!(topic_name("doppler"), "doppler");
+        assert_eq!(topic_name("run-2.final"), "run_2_final");
+        assert_eq!(topic_name("2024"), "est_2024");
+        assert_eq!(topic_name(""), "est_");
+    }
+
+    #[test]
+    fn twist_is_in_the_body_frame() {
+        // Moving along world +y at 2 m/s while yawed +90 deg: body +x; turning at 0.5 rad/s.
+        let pose = |t: f64| {
+            let yaw = std::f64::consts::FRAC_PI_2 + 0.5 * t;
+            TumPose {
+                t,
+                p: [0.0, 2.0 * t, 0.0],
+                q: [0.0, 0.0, (yaw / 2.0).sin(), (yaw / 2.0).cos()],
+            }
+        };
+        let poses: Vec<TumPose> = (0..3).map(|i| pose(f64::from(i) * 0.01)).collect();
+        let (v, w) = twist(&poses, 1);
+        // The body turns 0.005 rad from the path by the middle pose: x within 1e-4, y within 2e-2.
+        assert!((v[0] - 2.0).abs() < 1e-4 && v[1].abs() < 2e-2 && v[2].abs() < 1e-12, "{v:?}");
+        assert!(w[0].abs() < 1e-12 && w[1].abs() < 1e-12 && (w[2] - 0.5).abs() < 1e-9, "{w:?}");
+        // Ends use one-sided differences; a lone pose or equal times give zero.
+        assert_eq!(twist(&poses[..1], 0), ([0.0; 3], [0.0; 3]));
+    }
+
+    #[test]
+    fn qos_of_tf_static_is_transient_local() {
+        assert!(qos_yaml(true).contains("durability: 1\n"));
+        assert!(qos_yaml(false).contains("durability: 2\n"));
+        assert!(qos_yaml(false).starts_with("- history: 1\n  depth: 10\n"));
+    }
+}
