@@ -14,7 +14,7 @@ use milliego_session::streams::{imu_samples, radar_frames, SessionClock, StreamR
 use milliego_session::{Extrinsic, Session, SessionError, TumPose};
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::BufWriter;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 /// Topic of the radar point clouds.
@@ -115,6 +115,13 @@ pub enum ExportError {
         /// What is wrong.
         what: &'static str,
     },
+    /// A trajectory pose without a finite time.
+    BadPose {
+        /// Trajectory name.
+        name: String,
+        /// Index of the pose.
+        index: usize,
+    },
     /// Encoding a message failed.
     Cdr {
         /// Topic.
@@ -144,6 +151,9 @@ impl std::fmt::Display for ExportError {
             ExportError::Session(e) => write!(f, "{e}"),
             ExportError::BadName { name, what } => {
                 write!(f, "trajectory name {name:?}: {what}")
+            }
+            ExportError::BadPose { name, index } => {
+                write!(f, "trajectory {name:?}: pose {index} has no finite time")
             }
             ExportError::Cdr { topic, error } => write!(f, "{topic}: {error}"),
             ExportError::Io { path, error } => write!(f, "{}: {error}", path.display()),
@@ -369,6 +379,12 @@ pub fn export(
                 what: "use letters, digits and _ only, not starting with a digit",
             });
         }
+        if let Some(k) = e.poses.iter().position(|p| !p.t.is_finite()) {
+            return Err(ExportError::BadPose {
+                name: e.name.clone(),
+                index: k,
+            });
+        }
         // `/imu/pose` (the demo's imu.tum) does not collide with `/imu/data`; only these do.
         if e.name == GROUNDTRUTH || estimates[..i].iter().any(|o| o.name == e.name) {
             return Err(ExportError::BadName {
@@ -531,7 +547,10 @@ pub fn export(
     })
     .map_err(mcap_err)?;
     w.finish().map_err(mcap_err)?;
-    drop(w);
+    w.into_inner().flush().map_err(|error| ExportError::Io {
+        path: out.to_path_buf(),
+        error,
+    })?;
     let file_bytes = std::fs::metadata(out)
         .map_err(|error| ExportError::Io {
             path: out.to_path_buf(),
