@@ -10,6 +10,7 @@ use std::process::ExitCode;
 mod demo;
 mod eval;
 mod imu;
+mod mcap;
 mod odometry;
 mod output;
 mod plot;
@@ -63,6 +64,8 @@ enum Command {
     Replay(replay::ReplayArgs),
     /// Record the radar and IMU ports into a session.
     Record(record::RecordArgs),
+    /// A session and estimated trajectories as MCAP with ROS 2 schemas (Foxglove, ros2 bag).
+    ExportMcap(mcap::McapArgs),
 }
 
 fn main() -> ExitCode {
@@ -80,6 +83,7 @@ fn main() -> ExitCode {
         Command::Sim(args) => sim::run(args),
         Command::Replay(args) => replay::run(args),
         Command::Record(args) => record::run(args),
+        Command::ExportMcap(args) => mcap::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -6,7 +6,7 @@
 use crate::ego_velocity::{Config as EgoConfig, Detection, EgoVelocityEstimator, Prior, Status};
 use crate::rio::{RadarMount, Rio, RioConfig, VelocityMeasurement};
 use crate::strapdown::ImuSample;
-use milliego_session::streams::{imu_samples, radar_frames, ClockFit, StreamReport};
+use milliego_session::streams::{imu_samples, radar_frames, ClockFit, SessionClock, StreamReport};
 use milliego_session::{Extrinsic, Session, SessionError, TumPose};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
@@ -128,44 +128,11 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
     if cfg.estimator == Estimator::Doppler && frames.is_empty() {
         return Err(OfflineError::Missing("radar frames"));
     }
-    // Host stamps mark a frame's LAST byte: take its transmission time off, so the lower
-    // envelope of (sensor, host) maps the sensor clock to when output began.
-    let radar_baud = session.meta.radar.as_ref().map_or(921_600, |r| r.baud);
-    let imu_baud = session.meta.imu.as_ref().map_or(115_200, |m| m.baud);
-    let tx = |bytes: usize, baud: u32| bytes as f64 * 10.0 / f64::from(baud.max(1));
-    let radar_clock = ClockFit::fit(
-        &frames
-            .iter()
-            .filter_map(|f| Some((f.sensor_s?, f.host_s? - tx(f.bytes, radar_baud))))
-            .collect::<Vec<_>>(),
-    );
-    let imu_clock = ClockFit::fit(
-        &imu.iter()
-            .filter_map(|s| Some((s.sensor_s, s.host_s? - tx(s.bytes, imu_baud))))
-            .collect::<Vec<_>>(),
-    );
-    let clock_unsynced = radar_clock.is_none() || imu_clock.is_none();
-    let imu_t = |s: f64| imu_clock.map_or(s - imu[0].sensor_s, |c| c.host(s));
-    // The frame's timestamp is taken when its output is ready; its points were measured earlier,
-    // at the middle of the chirps: subtract the processing time (stats TLV) and half the chirping.
-    let half_chirps_s = session
-        .radar_cfg()?
-        .and_then(|t| radar_driver::cfg::RadarConfig::parse(&t).ok())
-        .and_then(|c| c.derive(None).ok())
-        .map_or(0.0, |d| d.active_frame_time_ms / 2e3);
-    let radar_t = |f: &milliego_session::streams::RadarFrame| -> Option<f64> {
-        let ready = match (radar_clock, f.sensor_s, f.host_s) {
-            (Some(c), Some(s), _) => c.host(s),
-            (None, _, Some(h)) => h - tx(f.bytes, radar_baud),
-            (None, Some(s), None) => s - frames.first().and_then(|f| f.sensor_s).unwrap_or(0.0),
-            _ => return None,
-        };
-        let processing = f
-            .cloud
-            .stats
-            .map_or(0.0, |s| f64::from(s.inter_frame_processing_time_us) * 1e-6);
-        Some(ready - processing - half_chirps_s)
-    };
+    // One time base for both streams (the lower-envelope clock fits of the session crate).
+    let clock = SessionClock::fit(session, &frames, &imu)?;
+    let (radar_clock, imu_clock, clock_unsynced) = (clock.radar, clock.imu, clock.unsynced());
+    let imu_t = |s: f64| clock.imu_s(s);
+    let radar_t = |f: &milliego_session::streams::RadarFrame| clock.radar_s(f);
 
     // Radar and IMU placement: the filter runs in the IMU frame.
     let (q_bi, t_bi) = iso(&session.meta.extrinsics.imu);

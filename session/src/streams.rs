@@ -263,3 +263,95 @@ fn least_squares(p: &[(f64, f64)]) -> Option<ClockFit> {
         residual_rms: rms,
     })
 }
+
+/// One time base for a session's radar frames and IMU samples: the session host clock \[s\],
+/// through the lower-envelope [`ClockFit`] of each stream after taking each frame's transmission
+/// time off its host stamp (host stamps mark a frame's LAST byte). Without an index (no host
+/// stamps) a stream falls back to its own sensor clock, starting at its first stamp.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SessionClock {
+    /// Radar sensor-to-host map (None without a timing index).
+    pub radar: Option<ClockFit>,
+    /// IMU sensor-to-host map (None without a timing index).
+    pub imu: Option<ClockFit>,
+    /// Radar UART rate \[bit/s\] (10 bits a byte on the wire).
+    pub radar_baud: u32,
+    /// IMU UART rate \[bit/s\].
+    pub imu_baud: u32,
+    /// Half the active chirping time of a frame \[s\] (0 without a .cfg): a frame's points are
+    /// measured at the middle of its chirps.
+    pub half_chirps_s: f64,
+    first_radar_sensor_s: f64,
+    first_imu_sensor_s: f64,
+}
+
+impl SessionClock {
+    /// Fits both streams' clocks to the host clock.
+    pub fn fit(
+        session: &Session,
+        frames: &[RadarFrame],
+        imu: &[ImuSample],
+    ) -> Result<SessionClock, SessionError> {
+        let radar_baud = session.meta.radar.as_ref().map_or(921_600, |r| r.baud);
+        let imu_baud = session.meta.imu.as_ref().map_or(115_200, |m| m.baud);
+        let radar = ClockFit::fit(
+            &frames
+                .iter()
+                .filter_map(|f| Some((f.sensor_s?, f.host_s? - tx_s(f.bytes, radar_baud))))
+                .collect::<Vec<_>>(),
+        );
+        let imu_fit = ClockFit::fit(
+            &imu.iter()
+                .filter_map(|s| Some((s.sensor_s, s.host_s? - tx_s(s.bytes, imu_baud))))
+                .collect::<Vec<_>>(),
+        );
+        let half_chirps_s = session
+            .radar_cfg()?
+            .and_then(|t| RadarConfig::parse(&t).ok())
+            .and_then(|c| c.derive(None).ok())
+            .map_or(0.0, |d| d.active_frame_time_ms / 2e3);
+        Ok(SessionClock {
+            radar,
+            imu: imu_fit,
+            radar_baud,
+            imu_baud,
+            half_chirps_s,
+            first_radar_sensor_s: frames.first().and_then(|f| f.sensor_s).unwrap_or(0.0),
+            first_imu_sensor_s: imu.first().map_or(0.0, |s| s.sensor_s),
+        })
+    }
+
+    /// True when the streams could not be put on one clock (no index): the sensor clocks are then
+    /// assumed to start together.
+    pub fn unsynced(&self) -> bool {
+        self.radar.is_none() || self.imu.is_none()
+    }
+
+    /// Host time of an IMU sensor time \[s\].
+    pub fn imu_s(&self, sensor_s: f64) -> f64 {
+        self.imu
+            .map_or(sensor_s - self.first_imu_sensor_s, |c| c.host(sensor_s))
+    }
+
+    /// Host time at which a radar frame's points were measured \[s\]: when its output was ready,
+    /// less the processing time (stats TLV) and half the chirping. None for a frame with neither
+    /// a host stamp nor a sensor time.
+    pub fn radar_s(&self, f: &RadarFrame) -> Option<f64> {
+        let ready = match (self.radar, f.sensor_s, f.host_s) {
+            (Some(c), Some(s), _) => c.host(s),
+            (None, _, Some(h)) => h - tx_s(f.bytes, self.radar_baud),
+            (None, Some(s), None) => s - self.first_radar_sensor_s,
+            _ => return None,
+        };
+        let processing = f
+            .cloud
+            .stats
+            .map_or(0.0, |s| f64::from(s.inter_frame_processing_time_us) * 1e-6);
+        Some(ready - processing - self.half_chirps_s)
+    }
+}
+
+/// Time on the wire of `bytes` at `baud` \[s\] (8N1: 10 bits a byte).
+fn tx_s(bytes: usize, baud: u32) -> f64 {
+    bytes as f64 * 10.0 / f64::from(baud.max(1))
+}
