@@ -13,7 +13,7 @@ pub struct McapArgs {
     /// Session directory (or bare captures); its ground truth, if any, becomes /groundtruth/*.
     session: PathBuf,
     /// Estimated trajectory (TUM, session host clock, e.g. from `milliego odometry`); repeatable,
-    /// each becomes /<file stem>/pose and /<file stem>/odom.
+    /// each becomes `/STEM/pose` and `/STEM/odom` (STEM: the file name without extension).
     #[arg(long = "poses", value_name = "EST.tum")]
     poses: Vec<PathBuf>,
     /// Output MCAP file.
