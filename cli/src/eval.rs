@@ -25,6 +25,16 @@ pub enum UnitArg {
     M,
 }
 
+impl From<AlignArg> for Align {
+    fn from(a: AlignArg) -> Align {
+        match a {
+            AlignArg::None => Align::None,
+            AlignArg::Se3 => Align::Se3,
+            AlignArg::Sim3 => Align::Sim3,
+        }
+    }
+}
+
 #[derive(Debug, Args)]
 pub struct EvalArgs {
     /// Estimated trajectory (TUM: t tx ty tz qx qy qz qw).
@@ -63,11 +73,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
     };
     let (gt, est) = (load(&a.gt)?, load(&a.est)?);
     let settings = Settings {
-        align: match a.align {
-            AlignArg::None => Align::None,
-            AlignArg::Se3 => Align::Se3,
-            AlignArg::Sim3 => Align::Sim3,
-        },
+        align: a.align.into(),
         max_diff: a.max_diff,
         offset: a.offset,
         rpe_delta: a.delta,

@@ -86,11 +86,7 @@ fn label(p: &Path) -> String {
 }
 
 fn trajectory(a: TrajectoryArgs) -> Result<()> {
-    let how = match a.align {
-        AlignArg::None => Align::None,
-        AlignArg::Se3 => Align::Se3,
-        AlignArg::Sim3 => Align::Sim3,
-    };
+    let how: Align = a.align.into();
     let ext = match a.format {
         FormatArg::Png => "png",
         FormatArg::Svg => "svg",

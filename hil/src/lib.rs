@@ -131,3 +131,12 @@ pub fn uart_ns(bytes: u64, baud: u32) -> u64 {
     let ns = u128::from(bytes) * 10_000_000_000 / u128::from(baud.max(1));
     u64::try_from(ns).unwrap_or(u64::MAX)
 }
+
+/// True for I/O errors that only mean "nothing moved this time" on a serial port or pty with a
+/// timeout (timed out, would block, interrupted): the loop retries instead of failing.
+pub(crate) fn is_transient(e: &io::Error) -> bool {
+    matches!(
+        e.kind(),
+        io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+    )
+}

@@ -477,16 +477,7 @@ fn read_loop<P: io::Read>(
                 break;
             }
             Ok(n) => n,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    io::ErrorKind::TimedOut
-                        | io::ErrorKind::WouldBlock
-                        | io::ErrorKind::Interrupted
-                ) =>
-            {
-                continue
-            }
+            Err(e) if crate::is_transient(&e) => continue,
             Err(e) => {
                 let hint = format!("{e} (device unplugged, or the other end closed?)");
                 error = fail("read", io::Error::new(e.kind(), hint));

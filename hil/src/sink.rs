@@ -137,14 +137,7 @@ impl Sink {
                     ))
                 }
                 Ok(n) => rest = &rest[n..],
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        io::ErrorKind::TimedOut
-                            | io::ErrorKind::WouldBlock
-                            | io::ErrorKind::Interrupted
-                    ) =>
-                {
+                Err(e) if crate::is_transient(&e) => {
                     blocked += t.elapsed();
                     if !told && blocked >= BLOCKED_NOTICE {
                         told = true;

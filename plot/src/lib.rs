@@ -466,6 +466,35 @@ where
     Ok(root.titled(title, ("sans-serif", size).into_font().color(&BLACK))?)
 }
 
+/// Draws the axes every figure shares: descriptions, tick labels at their own precision, a light
+/// grid without minor lines.
+fn draw_mesh<DB, X, Y>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<X, Y>>,
+    x_desc: &str,
+    y_desc: &str,
+    tick: f64,
+    desc: f64,
+) -> Result<(), Box<dyn Error>>
+where
+    DB: DrawingBackend,
+    DB::ErrorType: 'static,
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .label_style(("sans-serif", tick))
+        .axis_desc_style(("sans-serif", desc))
+        .x_label_formatter(&num)
+        .y_label_formatter(&num)
+        .light_line_style(WHITE.mix(0.0))
+        .bold_line_style(BLACK.mix(0.12))
+        .draw()?;
+    Ok(())
+}
+
 /// Builds a chart on `area` with equal metres per pixel along both axes around `b`.
 fn equal_chart<'a, DB: DrawingBackend>(
     area: &'a DrawingArea<DB, Shift>,
@@ -528,17 +557,7 @@ impl Figure for TopView<'_> {
         let (left, right) = split_for_bar(&area);
         let pts = self.gt.p.iter().chain(&self.est.p).map(|p| (p.x, p.y));
         let mut chart = equal_chart(&left, bounds(pts, 0.05, 1.0), tick, false)?;
-        chart
-            .configure_mesh()
-            .x_desc("x [m]")
-            .y_desc("y [m]")
-            .label_style(("sans-serif", tick))
-            .axis_desc_style(("sans-serif", desc))
-            .x_label_formatter(&num)
-            .y_label_formatter(&num)
-            .light_line_style(WHITE.mix(0.0))
-            .bold_line_style(BLACK.mix(0.12))
-            .draw()?;
+        draw_mesh(&mut chart, "x [m]", "y [m]", tick, desc)?;
         let gt_style = GROUND_TRUTH.stroke_width((tick / 8.0).max(1.0) as u32 + 1);
         chart
             .draw_series(LineSeries::new(
@@ -694,17 +713,13 @@ impl Figure for ErrorsOverTime<'_> {
             .x_label_area_size(x_label)
             .y_label_area_size(y_label)
             .build_cartesian_2d(0.0..t1, -emax..emax)?;
-        chart
-            .configure_mesh()
-            .x_desc("time [s]")
-            .y_desc("error, estimate − ground truth [m]")
-            .label_style(("sans-serif", tick))
-            .axis_desc_style(("sans-serif", desc))
-            .x_label_formatter(&num)
-            .y_label_formatter(&num)
-            .light_line_style(WHITE.mix(0.0))
-            .bold_line_style(BLACK.mix(0.12))
-            .draw()?;
+        draw_mesh(
+            &mut chart,
+            "time [s]",
+            "error, estimate − ground truth [m]",
+            tick,
+            desc,
+        )?;
         chart.draw_series(LineSeries::new([(0.0, 0.0), (t1, 0.0)], BLACK.mix(0.5)))?;
         for (k, (name, pts)) in ["x", "y", "z"].iter().zip(axes).enumerate() {
             let style = SERIES[k].stroke_width(2);
@@ -814,17 +829,7 @@ where
         .x_label_area_size(x_label)
         .y_label_area_size(y_label)
         .build_cartesian_2d(x, 0.0..1.0)?;
-    chart
-        .configure_mesh()
-        .x_desc("ATE [m]")
-        .y_desc("fraction of poses")
-        .label_style(("sans-serif", tick))
-        .axis_desc_style(("sans-serif", desc))
-        .x_label_formatter(&num)
-        .y_label_formatter(&num)
-        .light_line_style(WHITE.mix(0.0))
-        .bold_line_style(BLACK.mix(0.12))
-        .draw()?;
+    draw_mesh(&mut chart, "ATE [m]", "fraction of poses", tick, desc)?;
     for (k, (name, errors)) in sets.iter().enumerate() {
         let mut e: Vec<f64> = errors.iter().map(|&x| x.max(lo)).collect();
         e.sort_by(f64::total_cmp);
