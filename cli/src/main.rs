@@ -7,6 +7,7 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+mod dataset;
 mod demo;
 mod eval;
 mod imu;
@@ -43,6 +44,9 @@ enum Command {
     /// Xsens MTi IMU: dump messages, configure a device.
     #[command(subcommand)]
     Imu(imu::ImuCmd),
+    /// Training datasets for the learned model: sessions -> shards (docs/dataset.md).
+    #[command(subcommand)]
+    Dataset(dataset::DatasetCmd),
     /// Classical odometry over a session (Doppler radar-inertial or IMU-only), written as TUM.
     Odometry(odometry::OdometryArgs),
     /// Score every estimator on a set of the simulator's benchmark split (the paper's ATE table).
@@ -72,6 +76,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Demo(a) => demo::run(a),
+        Command::Dataset(cmd) => dataset::run(cmd),
         Command::Radar(cmd) => radar::run(cmd),
         Command::Imu(cmd) => imu::run(cmd),
         Command::Pose(cmd) => pose::run(cmd),
