@@ -1,9 +1,12 @@
 //! `milliego score`: every estimator on a set of the simulator's benchmark split, one table (ATE
-//! 3D/2D mean, std, max as in the paper's tables, and drift as % of path). The learned model's
-//! columns join this table when the model lands; today it scores the classical estimators.
+//! 3D/2D mean, std, max as in the paper's tables, and drift as % of path): IMU-only dead
+//! reckoning, Doppler radar-inertial odometry and the learned model (each `--model` file, fp32 or
+//! int8, run with tract exactly as the runtime runs it).
 
 use clap::Args;
 use milliego_eval::{evaluate, Settings, Stats, Trajectory};
+use milliego_models::offline::run_session;
+use milliego_models::Model;
 use milliego_odometry::offline::{run as run_offline, Estimator, OfflineConfig};
 use milliego_session::Session;
 use milliego_sim::scenario::run as simulate;
@@ -30,6 +33,27 @@ pub struct ScoreArgs {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     json: bool,
+    /// Learned models to score (ONNX from milliego_models.export / quantize); repeatable.
+    /// Default: models/compact/model.onnx and model-int8.onnx when present.
+    #[arg(long)]
+    model: Vec<PathBuf>,
+    /// Score only the classical estimators.
+    #[arg(long)]
+    no_model: bool,
+}
+
+/// One column of the table.
+enum Column {
+    Classical(Estimator),
+    Model(Box<Model>),
+}
+
+fn default_models() -> Vec<PathBuf> {
+    ["models/compact/model.onnx", "models/compact/model-int8.onnx"]
+        .iter()
+        .map(PathBuf::from)
+        .filter(|p| p.is_file())
+        .collect()
 }
 
 pub fn run(a: ScoreArgs) -> Result<()> {
@@ -42,10 +66,30 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         .filter(|e| e.set == set)
         .take(a.limit.unwrap_or(usize::MAX))
         .collect();
-    let estimators = [("imu", Estimator::ImuOnly), ("doppler", Estimator::Doppler)];
+    let mut estimators: Vec<(String, Column)> = vec![
+        ("IMU dead reckoning".into(), Column::Classical(Estimator::ImuOnly)),
+        ("Doppler RIO".into(), Column::Classical(Estimator::Doppler)),
+    ];
+    let models = if a.no_model {
+        Vec::new()
+    } else if a.model.is_empty() {
+        default_models()
+    } else {
+        a.model.clone()
+    };
+    for path in &models {
+        let m = Model::load(path, Some(&milliego_preprocess::Config::default()))?;
+        let name = format!(
+            "milliEgo {} {}{}",
+            m.meta().config,
+            m.meta().precision,
+            if m.meta().trained { "" } else { " (UNTRAINED)" }
+        );
+        estimators.push((name, Column::Model(Box::new(m))));
+    }
     let mut per: Vec<(String, Vec<SessionScore>)> = estimators
         .iter()
-        .map(|(n, _)| (n.to_string(), Vec::new()))
+        .map(|(n, _)| (n.clone(), Vec::new()))
         .collect();
     for (i, e) in entries.iter().enumerate() {
         let dir = work.join(set.name()).join(e.dir_name());
@@ -55,19 +99,21 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         }
         let s = Session::open(&dir)?;
         let gt = Trajectory::from_tum(&s.groundtruth()?.ok_or("no ground truth")?);
-        for ((_, est), (_, out)) in estimators.iter().zip(per.iter_mut()) {
-            let r = run_offline(
-                &s,
-                &OfflineConfig {
-                    estimator: *est,
-                    ..OfflineConfig::default()
-                },
-            )?;
-            let rep = evaluate(
-                &gt,
-                &Trajectory::from_tum(&r.trajectory),
-                &Settings::default(),
-            )?;
+        for ((_, est), (_, out)) in estimators.iter_mut().zip(per.iter_mut()) {
+            let trajectory = match est {
+                Column::Classical(est) => {
+                    run_offline(
+                        &s,
+                        &OfflineConfig {
+                            estimator: *est,
+                            ..OfflineConfig::default()
+                        },
+                    )?
+                    .trajectory
+                }
+                Column::Model(m) => run_session(m, &s)?.trajectory,
+            };
+            let rep = evaluate(&gt, &Trajectory::from_tum(&trajectory), &Settings::default())?;
             out.push((rep.ate.mean, rep.ate_2d.mean, rep.final_drift_pct));
         }
     }
@@ -93,21 +139,15 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         set.name()
     );
     println!(
-        "{:<22} {:>22} {:>22} {:>10}",
+        "{:<30} {:>22} {:>22} {:>10}",
         "estimator", "ATE 3D mean/std/max", "ATE 2D mean/std/max", "drift %"
     );
-    for (n, v) in &per {
+    for (name, v) in &per {
         let (a3, a2, d) = summarise(v);
-        let name = if n == "imu" {
-            "IMU dead reckoning"
-        } else {
-            "Doppler RIO"
-        };
         println!(
-            "{name:<22} {:>7.2}/{:>6.2}/{:>7.2} {:>7.2}/{:>6.2}/{:>7.2} {:>10.2}",
+            "{name:<30} {:>7.2}/{:>6.2}/{:>7.2} {:>7.2}/{:>6.2}/{:>7.2} {:>10.2}",
             a3.mean, a3.std, a3.max, a2.mean, a2.std, a2.max, d.mean
         );
     }
-    println!("(milliEgo fp32/int8 columns: pending the model, issue 5)");
     Ok(())
 }

@@ -5,12 +5,12 @@
 //! ([`crate::pose`]). One safetensors file per session; `manifest.json` holds the preprocessing
 //! settings, the dataset-wide normalisation and what was skipped, with the reason.
 
-use crate::pose::{from_label, interpolate, relative, to_label};
-use crate::window::{BuilderConfig, Counters, WindowBuilder};
+use crate::pose::{interpolate, relative, to_label};
+use crate::window::{BuilderConfig, Counters, Window, WindowBuilder};
 use crate::{Config, Norm, IMU_LEN, PANO_H, PANO_W};
 use milliego_session::streams::{imu_samples, radar_frames, SessionClock, StreamReport};
 use milliego_session::{Session, SessionError};
-use nalgebra::{Quaternion, UnitQuaternion};
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use safetensors::tensor::{Dtype, TensorView};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -105,16 +105,50 @@ impl Shard {
     }
 }
 
-/// Builds one session's shard.
-pub fn shard_from_session(session: &Session, pre: &Config) -> Result<Shard, DatasetError> {
+/// What [`feed_session`] hands its callback, in time order.
+#[derive(Debug)]
+pub enum Event<'a> {
+    /// A radar frame was accepted: its push sequence number, time \[s\] and overlaid panorama.
+    Frame {
+        /// Push sequence number (index among accepted frames).
+        seq: u64,
+        /// Measurement time on the session clock \[s\].
+        t: f64,
+        /// Overlaid panorama.
+        panorama: &'a [f32; crate::PANO_LEN],
+    },
+    /// A window is ready.
+    Window(Window<'a>),
+}
+
+/// What feeding a session saw.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Fed {
+    /// Radar stream decoding.
+    pub radar: StreamReport,
+    /// IMU stream decoding.
+    pub imu: StreamReport,
+    /// IMU samples decoded.
+    pub imu_samples: usize,
+    /// Radar frames without a measurement time.
+    pub frames_without_time: u64,
+    /// The window builder's counters.
+    pub counters: Counters,
+}
+
+/// Feeds a session's radar frames and IMU samples through a [`WindowBuilder`] in time order on
+/// the session clock (exactly as the runtime receives them, minus the latency), IMU samples
+/// rotated into the body frame with the session's extrinsic.
+pub fn feed_session(
+    session: &Session,
+    pre: &Config,
+    on: &mut dyn FnMut(Event<'_>),
+) -> Result<Fed, DatasetError> {
     pre.validate().map_err(DatasetError::Config)?;
     let unusable = |why: &str| DatasetError::Unusable {
         session: session.dir.clone(),
         why: why.to_string(),
     };
-    let gt = session
-        .groundtruth()?
-        .ok_or_else(|| unusable("no ground truth: a training dataset needs labels"))?;
     let (frames, radar) = radar_frames(session)?;
     let (imu, imu_stream) = imu_samples(session)?;
     if frames.is_empty() || imu.is_empty() {
@@ -128,57 +162,68 @@ pub fn shard_from_session(session: &Session, pre: &Config) -> Result<Shard, Data
         ..BuilderConfig::default()
     })
     .map_err(DatasetError::Config)?;
-
-    let mut shard = Shard {
-        session: session.dir.file_name().map_or_else(
-            || session.dir.display().to_string(),
-            |n| n.to_string_lossy().into(),
-        ),
+    let mut fed = Fed {
         radar,
-        imu_stream,
-        ..Shard::default()
+        imu: imu_stream,
+        imu_samples: imu.len(),
+        ..Fed::default()
     };
-    // Both streams in time order on the session clock.
     let mut timed: Vec<(f64, usize)> = Vec::with_capacity(frames.len());
     for (i, f) in frames.iter().enumerate() {
         match clock.radar_s(f) {
             Some(t) => timed.push((t, i)),
-            None => shard.frames_without_time += 1,
+            None => fed.frames_without_time += 1,
         }
     }
     timed.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut next_imu = 0;
-    let emit = |b: &mut WindowBuilder, shard: &mut Shard| {
+    let drain = |b: &mut WindowBuilder, on: &mut dyn FnMut(Event<'_>)| {
         while let Some(win) = b.poll() {
-            let gi = |seq: u64| &shard.gt_pose[seq as usize * 7..seq as usize * 7 + 7];
-            let (a, c) = (gi(win.prev_seq), gi(win.cur_seq));
-            if a[0].is_nan() || c[0].is_nan() {
-                shard.no_ground_truth += 1;
-                continue;
-            }
-            let iso = |p: &[f64]| {
-                nalgebra::Isometry3::from_parts(
-                    nalgebra::Translation3::new(p[0], p[1], p[2]),
-                    UnitQuaternion::from_quaternion(Quaternion::new(p[6], p[3], p[4], p[5])),
-                )
-            };
-            let label = to_label(&relative(&iso(a), &iso(c)));
-            debug_assert!(from_label(&label).is_some());
-            shard.pair.extend([win.prev_seq as i64, win.cur_seq as i64]);
-            shard.imu.extend(win.imu.iter().flatten());
-            shard.label.extend(label.map(|v| v as f32));
+            on(Event::Window(win));
         }
     };
+    let mut next_imu = 0;
+    let mut seq = 0u64;
     for &(t, i) in &timed {
         while next_imu < imu.len() && clock.imu_s(imu[next_imu].sensor_s) <= t {
             let s = &imu[next_imu];
             builder.push_imu(clock.imu_s(s.sensor_s), s.accel, s.gyro);
             next_imu += 1;
-            emit(&mut builder, &mut shard);
+            drain(&mut builder, on);
         }
         let f = &frames[i];
-        if let Some(pano) = builder.push_radar(f.frame_number, t, &f.cloud.points) {
-            shard.panorama.extend_from_slice(pano);
+        if let Some(panorama) = builder.push_radar(f.frame_number, t, &f.cloud.points) {
+            on(Event::Frame { seq, t, panorama });
+            seq += 1;
+        }
+        drain(&mut builder, on);
+    }
+    for s in &imu[next_imu..] {
+        builder.push_imu(clock.imu_s(s.sensor_s), s.accel, s.gyro);
+        drain(&mut builder, on);
+    }
+    builder.finish();
+    fed.counters = *builder.counters();
+    Ok(fed)
+}
+
+/// Builds one session's shard.
+pub fn shard_from_session(session: &Session, pre: &Config) -> Result<Shard, DatasetError> {
+    let gt = session
+        .groundtruth()?
+        .ok_or_else(|| DatasetError::Unusable {
+            session: session.dir.clone(),
+            why: "no ground truth: a training dataset needs labels".into(),
+        })?;
+    let mut shard = Shard {
+        session: session
+            .dir
+            .file_name()
+            .map_or_else(|| session.dir.display().to_string(), |n| n.to_string_lossy().into()),
+        ..Shard::default()
+    };
+    let fed = feed_session(session, pre, &mut |ev| match ev {
+        Event::Frame { t, panorama, .. } => {
+            shard.panorama.extend_from_slice(panorama);
             shard.frame_time.push(t);
             match interpolate(&gt, t, GT_MAX_GAP_S) {
                 Some(p) => {
@@ -189,21 +234,39 @@ pub fn shard_from_session(session: &Session, pre: &Config) -> Result<Shard, Data
                 None => shard.gt_pose.extend([f64::NAN; 7]),
             }
         }
-        emit(&mut builder, &mut shard);
-    }
-    for s in &imu[next_imu..] {
-        builder.push_imu(clock.imu_s(s.sensor_s), s.accel, s.gyro);
-        emit(&mut builder, &mut shard);
-    }
-    builder.finish();
-    shard.counters = *builder.counters();
+        Event::Window(win) => {
+            let gi = |seq: u64| &shard.gt_pose[seq as usize * 7..seq as usize * 7 + 7];
+            let (a, c) = (gi(win.prev_seq), gi(win.cur_seq));
+            if a[0].is_nan() || c[0].is_nan() {
+                shard.no_ground_truth += 1;
+                return;
+            }
+            let iso = |p: &[f64]| {
+                Isometry3::from_parts(
+                    Translation3::new(p[0], p[1], p[2]),
+                    UnitQuaternion::from_quaternion(Quaternion::new(p[6], p[3], p[4], p[5])),
+                )
+            };
+            let label = to_label(&relative(&iso(a), &iso(c)));
+            shard.pair.extend([win.prev_seq as i64, win.cur_seq as i64]);
+            shard.imu.extend(win.imu.iter().flatten());
+            shard.label.extend(label.map(|v| v as f32));
+        }
+    })?;
+    shard.radar = fed.radar;
+    shard.imu_stream = fed.imu;
+    shard.frames_without_time = fed.frames_without_time;
+    shard.counters = fed.counters;
     if shard.windows() == 0 {
-        return Err(unusable(&format!(
-            "no training windows ({} frames, {} IMU samples, counters {:?})",
-            shard.frames(),
-            imu.len(),
-            shard.counters
-        )));
+        return Err(DatasetError::Unusable {
+            session: session.dir.clone(),
+            why: format!(
+                "no training windows ({} frames, {} IMU samples, counters {:?})",
+                shard.frames(),
+                fed.imu_samples,
+                shard.counters
+            ),
+        });
     }
     Ok(shard)
 }

@@ -1,0 +1,330 @@
+//! The milliEgo network at run time (stage "windows -> model -> relative pose").
+//!
+//! [`Model::load`] reads an exported ONNX graph (fp32 or int8, see `models/python/README.md` and
+//! `docs/model.md`), checks its metadata and input shapes against this build's preprocessing,
+//! optimises it once with tract and keeps one runnable plan and one LSTM state. [`Model::step`]
+//! runs one window: radar tensor 6 x 64 x 256, IMU window 20 x 6, giving the relative body pose
+//! `[tx, ty, tz [m], roll, pitch, yaw [deg]]` (conventions: `milliego_preprocess::pose`).
+//!
+//! A stateless model (as the authors released it) is fed a zero state every call; a stateful one
+//! carries its state from window to window until [`Model::reset`].
+#![forbid(unsafe_code)]
+
+pub mod offline;
+
+use milliego_preprocess::window::Window;
+use milliego_preprocess::{Config, Norm, IMU_LEN, RADAR_LEN};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use tract_onnx::prelude::*;
+
+/// Model input names and shapes (batch 1), in graph order.
+pub const INPUTS: [&str; 3] = ["radar", "imu", "state"];
+/// Model output names.
+pub const OUTPUTS: [&str; 2] = ["pose", "state_out"];
+/// Rows of the LSTM state: h1, c1, h2, c2 of the two fusion layers.
+pub const STATE_ROWS: usize = 4;
+
+/// What the exporter writes into the ONNX `metadata_props` under the key `milliego` (JSON).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelMeta {
+    /// Size configuration (`paper`, `compact`, `tiny`).
+    pub config: String,
+    /// True when the LSTM state is carried across windows.
+    pub stateful: bool,
+    /// Fusion LSTM width (the state is 1 x 4 x hidden).
+    pub hidden: usize,
+    /// Preprocessing the model was trained with.
+    pub preprocess: Config,
+    /// Normalisation of the radar images.
+    pub norm: Norm,
+    /// Label conventions, in words.
+    #[serde(default)]
+    pub label: String,
+    /// False for graphs with random weights (speed benchmarks only).
+    pub trained: bool,
+    /// `fp32` or `int8`.
+    pub precision: String,
+    /// Parameter count, if recorded.
+    #[serde(default)]
+    pub params: Option<u64>,
+    /// Validation ATE of the checkpoint \[m\], if recorded.
+    #[serde(default)]
+    pub val_ate_m: Option<f64>,
+}
+
+/// Why a model could not be loaded or run. Every variant names the file.
+#[derive(Debug)]
+pub enum ModelError {
+    /// The file could not be read or parsed as ONNX.
+    Load {
+        /// Model file.
+        path: PathBuf,
+        /// Cause.
+        why: String,
+    },
+    /// The metadata is missing or malformed.
+    Metadata {
+        /// Model file.
+        path: PathBuf,
+        /// Cause.
+        why: String,
+    },
+    /// The graph's inputs or outputs do not match what the preprocessing produces.
+    Interface {
+        /// Model file.
+        path: PathBuf,
+        /// What differs.
+        why: String,
+    },
+    /// tract could not optimise or run the graph.
+    Run {
+        /// Model file.
+        path: PathBuf,
+        /// Cause.
+        why: String,
+    },
+}
+
+impl std::fmt::Display for ModelError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (what, path, why) = match self {
+            ModelError::Load { path, why } => ("cannot load", path, why),
+            ModelError::Metadata { path, why } => ("bad metadata in", path, why),
+            ModelError::Interface { path, why } => ("interface mismatch in", path, why),
+            ModelError::Run { path, why } => ("inference failed with", path, why),
+        };
+        write!(f, "model: {what} {}: {why}", path.display())
+    }
+}
+
+impl std::error::Error for ModelError {}
+
+type Plan = TypedSimplePlan;
+
+/// A loaded, optimised model with its LSTM state.
+#[derive(Debug)]
+pub struct Model {
+    path: PathBuf,
+    meta: ModelMeta,
+    plan: Plan,
+    state: Tensor,
+    zero_state: Tensor,
+    radar: Box<[f32; RADAR_LEN]>,
+    steps: u64,
+}
+
+/// The ONNX file's `milliego` metadata, without building the graph.
+pub fn read_meta(path: &Path) -> Result<ModelMeta, ModelError> {
+    let proto = tract_onnx::onnx()
+        .proto_model_for_path(path)
+        .map_err(|e| ModelError::Load {
+            path: path.into(),
+            why: format!("{e:#}"),
+        })?;
+    meta_of(path, &proto)
+}
+
+fn meta_of(path: &Path, proto: &tract_onnx::pb::ModelProto) -> Result<ModelMeta, ModelError> {
+    let bad = |why: String| ModelError::Metadata {
+        path: path.into(),
+        why,
+    };
+    let entry = proto
+        .metadata_props
+        .iter()
+        .find(|p| p.key == "milliego")
+        .ok_or_else(|| bad("no 'milliego' entry in metadata_props (not exported by milliego_models.export?)".into()))?;
+    let meta: ModelMeta =
+        serde_json::from_str(&entry.value).map_err(|e| bad(format!("milliego entry: {e}")))?;
+    meta.preprocess.validate().map_err(bad)?;
+    meta.norm.validate().map_err(bad)?;
+    if meta.hidden == 0 || meta.hidden > 65_536 {
+        return Err(bad(format!("hidden size {} out of range", meta.hidden)));
+    }
+    Ok(meta)
+}
+
+impl Model {
+    /// Loads, checks and optimises `path`. With `expect`, the model's preprocessing settings
+    /// must equal it (the runtime passes its own so a model trained differently stops at
+    /// start-up).
+    pub fn load(path: &Path, expect: Option<&Config>) -> Result<Model, ModelError> {
+        let load_err = |e: TractError| ModelError::Load {
+            path: path.into(),
+            why: format!("{e:#}"),
+        };
+        let iface = |why: String| ModelError::Interface {
+            path: path.into(),
+            why,
+        };
+        let onnx = tract_onnx::onnx();
+        let proto = onnx.proto_model_for_path(path).map_err(load_err)?;
+        let meta = meta_of(path, &proto)?;
+        if let Some(want) = expect {
+            if *want != meta.preprocess {
+                return Err(iface(format!(
+                    "trained with preprocessing {:?}, this runtime uses {want:?}",
+                    meta.preprocess
+                )));
+            }
+        }
+        let names: Vec<&str> = proto
+            .graph
+            .as_ref()
+            .map(|g| {
+                let inits: Vec<&str> = g.initializer.iter().map(|t| t.name.as_str()).collect();
+                g.input
+                    .iter()
+                    .map(|i| i.name.as_str())
+                    .filter(|n| !inits.contains(n))
+                    .collect()
+            })
+            .unwrap_or_default();
+        if names != INPUTS {
+            return Err(iface(format!("inputs {names:?}, expected {INPUTS:?}")));
+        }
+        let h = meta.hidden;
+        let mut model = onnx.model_for_proto_model(&proto).map_err(load_err)?;
+        let shapes: [&[usize]; 3] = [&[1, 6, 64, 256], &[1, IMU_LEN, 6], &[1, STATE_ROWS, h]];
+        for (i, s) in shapes.iter().enumerate() {
+            model
+                .set_input_fact(i, f32::fact(*s).into())
+                .map_err(|e| iface(format!("input {} as {s:?}: {e:#}", INPUTS[i])))?;
+        }
+        let run_err = |e: TractError| ModelError::Run {
+            path: path.into(),
+            why: format!("{e:#}"),
+        };
+        let typed = model.into_optimized().map_err(|e| iface(format!("{e:#}")))?;
+        let out_shapes: Vec<Vec<usize>> = typed
+            .output_outlets()
+            .map_err(run_err)?
+            .iter()
+            .map(|o| {
+                typed
+                    .outlet_fact(*o)
+                    .ok()
+                    .and_then(|f| f.shape.as_concrete().map(|s| s.to_vec()))
+                    .unwrap_or_default()
+            })
+            .collect();
+        if out_shapes != [vec![1, 6], vec![1, STATE_ROWS, h]] {
+            return Err(iface(format!(
+                "outputs {out_shapes:?}, expected [[1, 6], [1, {STATE_ROWS}, {h}]] (pose, state_out)"
+            )));
+        }
+        let plan = typed.into_runnable().map_err(run_err)?;
+        let zero_state = Tensor::zero::<f32>(&[1, STATE_ROWS, h]).map_err(run_err)?;
+        Ok(Model {
+            path: path.into(),
+            meta,
+            state: zero_state.clone(),
+            zero_state,
+            plan,
+            radar: Box::new([0.0; RADAR_LEN]),
+            steps: 0,
+        })
+    }
+
+    /// The model's metadata.
+    pub fn meta(&self) -> &ModelMeta {
+        &self.meta
+    }
+
+    /// The file it came from.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Windows run so far.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Forgets the LSTM state (after a gap in the windows, a sensor restart).
+    pub fn reset(&mut self) {
+        self.state = self.zero_state.clone();
+    }
+
+    /// One window: returns the relative pose `[tx, ty, tz, roll, pitch, yaw]`.
+    pub fn step(&mut self, w: &Window<'_>) -> Result<[f32; 6], ModelError> {
+        w.radar_tensor(&self.meta.norm, &mut self.radar);
+        let radar = self.tensor(&[1, 6, 64, 256], &self.radar[..])?;
+        let imu = self.imu_tensor(w.imu)?;
+        self.step_with(radar, imu)
+    }
+
+    /// One step on prepared inputs (radar 6 x 64 x 256 channels-first, IMU 20 x 6).
+    pub fn step_tensors(
+        &mut self,
+        radar: &[f32],
+        imu: &[[f32; 6]; IMU_LEN],
+    ) -> Result<[f32; 6], ModelError> {
+        let radar = self.tensor(&[1, 6, 64, 256], radar)?;
+        let imu = self.imu_tensor(imu)?;
+        self.step_with(radar, imu)
+    }
+
+    fn step_with(&mut self, radar: Tensor, imu: Tensor) -> Result<[f32; 6], ModelError> {
+        let state = if self.meta.stateful {
+            self.state.clone()
+        } else {
+            self.zero_state.clone()
+        };
+        let (pose, state_out) = self.run_raw(radar, imu, state)?;
+        if self.meta.stateful {
+            self.state = state_out;
+        }
+        self.steps += 1;
+        Ok(pose)
+    }
+
+    fn run_err(&self, why: String) -> ModelError {
+        ModelError::Run {
+            path: self.path.clone(),
+            why,
+        }
+    }
+
+    /// A tensor of `shape` from `data` (length checked).
+    pub fn tensor(&self, shape: &[usize], data: &[f32]) -> Result<Tensor, ModelError> {
+        Tensor::from_shape(shape, data).map_err(|e| self.run_err(format!("{e:#}")))
+    }
+
+    fn imu_tensor(&self, imu: &[[f32; 6]; IMU_LEN]) -> Result<Tensor, ModelError> {
+        let mut flat = [0.0f32; IMU_LEN * 6];
+        for (d, s) in flat.chunks_exact_mut(6).zip(imu) {
+            d.copy_from_slice(s);
+        }
+        self.tensor(&[1, IMU_LEN, 6], &flat)
+    }
+
+    /// Runs the graph once with explicit inputs (radar 1 x 6 x 64 x 256, IMU 1 x 20 x 6, state
+    /// 1 x 4 x hidden); returns the pose and the new state. The model's own state is untouched.
+    pub fn run_raw(
+        &self,
+        radar: Tensor,
+        imu: Tensor,
+        state: Tensor,
+    ) -> Result<([f32; 6], Tensor), ModelError> {
+        let mut out = self
+            .plan
+            .run(tvec![radar.into(), imu.into(), state.into()])
+            .map_err(|e| self.run_err(format!("{e:#}")))?;
+        let state_out = out.pop().ok_or_else(|| self.run_err("no state output".into()))?;
+        let pose_t = out.pop().ok_or_else(|| self.run_err("no pose output".into()))?;
+        let p = pose_t
+            .as_slice::<f32>()
+            .map_err(|e| self.run_err(format!("{e:#}")))?;
+        if p.len() != 6 {
+            return Err(self.run_err(format!("pose has {} values", p.len())));
+        }
+        let mut pose = [0.0f32; 6];
+        pose.copy_from_slice(p);
+        if !pose.iter().all(|v| v.is_finite()) {
+            return Err(self.run_err(format!("non-finite pose {pose:?}")));
+        }
+        Ok((pose, state_out.into_tensor()))
+    }
+}
