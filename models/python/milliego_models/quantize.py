@@ -20,7 +20,8 @@ import sys
 import numpy as np
 import onnx
 
-from .onnx_utils import (get_metadata, nonzero_zero_points, op_problems, ort_session, set_metadata)
+from .data import expand_panorama, stack_pair
+from .onnx_utils import get_metadata, nonzero_zero_points, op_problems, ort_session, set_metadata
 
 MAX_CHAIN_RUN = 200  # stateful calibration: windows are picked within the first N of each chain
 
@@ -53,8 +54,8 @@ def random_feeds(n: int, hidden: int, seed: int = 0) -> list[dict]:
     feeds = []
     for _ in range(n):
         pano = np.where(rng.random((2, 16, 64)) < 0.1, rng.random((2, 16, 64)), 0).astype(np.float32)
-        img = np.repeat(np.repeat(pano, 4, 1), 4, 2) - pano.mean()
-        radar = np.concatenate([np.repeat(img[:1], 3, 0), np.repeat(img[1:], 3, 0)])[None]
+        img = expand_panorama(pano, {"min": 0.0, "max": 1.0, "mean": float(pano.mean())})
+        radar = stack_pair(img[0], img[1])[None]
         imu = (rng.normal(0, 1, (1, 20, 6)) + np.array([0, 0, 9.81, 0, 0, 0])).astype(np.float32)
         feeds.append({"radar": radar.astype(np.float32), "imu": imu,
                       "state": np.zeros((1, 4, hidden), np.float32)})

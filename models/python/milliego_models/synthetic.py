@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .geometry import quat_to_rot, relative_label, rot_to_quat
+from .data import expand_panorama
+from .geometry import relative_label, rot_to_quat
 
 PREPROCESS = {"gap": 5, "overlay": 3, "az_half_deg": 63.0, "el_half_deg": 15.0, "deg_per_px": 2.0,
               "pano_h": 16, "pano_w": 64, "upscale": 4, "img_h": 64, "img_w": 256, "imu_len": 20,
@@ -114,7 +115,7 @@ def write_authors_h5(path, frames: int = 40, seed: int = 0) -> Path:
     pre = dict(PREPROCESS, gap=1)
     s = synthetic_session(frames, seed, pre=pre)
     rng = np.random.default_rng(seed)
-    img = np.repeat(np.repeat(s["panorama"], 4, 1), 4, 2) * 255.0
+    img = expand_panorama(s["panorama"], {"min": 0.0, "max": 1.0, "mean": 0.0}) * 255.0
     imu30 = rng.normal(0, 1, (frames, 30, 6)).astype(np.float32)
     imu30[1:, :20] = s["imu"][:, ::-1]  # newest first
     with h5py.File(path, "w") as f:
