@@ -33,6 +33,7 @@ def golden(fp32: str, int8: str, data, windows: int, chain: int | None = None) -
     out: dict[str, np.ndarray] = {}
     offset = np.cumsum([0] + [len(s.frames) for s in data.sessions])[data.session_of[c[0]]]
     out["window_pair"] = (data.pair[c] - offset).astype(np.int64)
+    golden.session = data.sessions[data.session_of[c[0]]].name
     for k, w in enumerate(c):
         feed = {"radar": data.radar([w]).astype(np.float32), "imu": data.imu[[w]].astype(np.float32), "state": state}
         pose, state_out = f32.run(["pose", "state_out"], feed)
@@ -60,6 +61,7 @@ def main(argv=None) -> int:
     t = golden(a.fp32, a.int8, data, a.windows, a.chain)
     meta = get_metadata(onnx.load(a.fp32))
     save_file(t, a.out, metadata={"milliego": json.dumps(meta, sort_keys=True), "windows": str(a.windows),
+                                  "session": golden.session,
                                   "state": "state_k fed to both models; stateful: state_k = state_out_fp32_{k-1}"})
     d = max(float(np.abs(t[f"pose_int8_{k}"] - t[f"pose_fp32_{k}"]).max()) for k in range(a.windows))
     print(f"wrote {a.out}: {a.windows} windows {t['window_pair'].tolist()}, stateful {meta['stateful']}, "
