@@ -145,9 +145,10 @@ def evaluate(net, data: WindowData, stateful: bool, device, gamma: float) -> dic
         frames = np.concatenate([[data.pair[c[0], 0]], data.pair[c, 1]])
         est = compose(pose_to_matrix(data.gt_pose[frames[0]]), p)[:, :3, 3]
         errs.setdefault(int(data.session_of[c[0]]), []).append(aligned_errors(est, data.gt_pose[frames, :3]))
-        losses.append(pose_loss(torch.from_numpy(p), torch.from_numpy(data.label[c]), gamma)[0].item() * len(c))
+        losses.append([x.item() * len(c) for x in pose_loss(torch.from_numpy(p), torch.from_numpy(data.label[c]), gamma)])
     per = [np.concatenate(v) for v in errs.values()]
-    return {"val_loss": float(np.sum(losses) / max(1, sum(len(c) for c in data.chains))),
+    loss, trans, rot = np.sum(losses, axis=0) / max(1, sum(len(c) for c in data.chains))
+    return {"val_loss": float(loss), "val_trans_mse": float(trans), "val_rot_mse_deg2": float(rot),
             "val_ate_rmse_m": float(np.mean([np.sqrt(np.mean(e ** 2)) for e in per])),
             "val_ate_mean_m": float(np.mean([e.mean() for e in per]))}
 
