@@ -1,0 +1,113 @@
+"""Static int8 quantization in the form tract runs fastest.
+
+    python -m milliego_models.quantize --model model.onnx --data DATASET_DIR --out model-int8.onnx \
+        [--calib-windows 256] [--per-channel]
+
+Recipe (see shared/reference/milliego-model.md, tract findings): onnxruntime `quantize_static`,
+QOperator format, s8 activations and weights, both symmetric (zero point 0, so tract folds the int8
+weights once), only Conv and MatMul quantized -> QLinearConv / QLinearMatMul plus QuantizeLinear /
+DequantizeLinear around them; every other op stays fp32. No com.microsoft ops. Calibration (MinMax) runs
+on real dataset windows; for a stateful model the `state` input of each calibration window is the state
+the fp32 model reaches when run along that window's chain from its start.
+Per-tensor weight scales by default (the recipe measured in tract); `--per-channel` gives per-output-
+channel weight scales, still standard ops (checked), but not yet measured in tract.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+import onnx
+
+from .data import expand_panorama, stack_pair
+from .onnx_utils import get_metadata, nonzero_zero_points, op_problems, ort_session, set_metadata
+
+MAX_CHAIN_RUN = 200  # stateful calibration: windows are picked within the first N of each chain
+
+
+def calibration_feeds(fp32_path: str, data, n: int, stateful: bool, hidden: int) -> list[dict]:
+    """`n` feed dicts {radar, imu, state} spread over the dataset's chains."""
+    chains = sorted(data.chains, key=len, reverse=True)
+    per_chain = max(1, -(-n // len(chains)))
+    sess = ort_session(fp32_path) if stateful else None
+    feeds = []
+    for c in chains:
+        if len(feeds) >= n:
+            break
+        span = min(len(c), MAX_CHAIN_RUN) if stateful else len(c)
+        picks = set(np.linspace(0, span - 1, min(per_chain, span)).round().astype(int).tolist())
+        state = np.zeros((1, 4, hidden), np.float32)
+        for t in range(max(picks) + 1 if stateful else 0):
+            feed = {"radar": data.radar([c[t]]), "imu": data.imu[[c[t]]], "state": state}
+            if t in picks:
+                feeds.append(feed)
+            state = sess.run(["state_out"], feed)[0]
+        if not stateful:
+            feeds += [{"radar": data.radar([c[t]]), "imu": data.imu[[c[t]]], "state": state} for t in sorted(picks)]
+    return feeds[:n]
+
+
+def random_feeds(n: int, hidden: int, seed: int = 0) -> list[dict]:
+    """Seeded random inputs shaped like real ones (panorama-like sparse image, IMU near gravity)."""
+    rng = np.random.default_rng(seed)
+    feeds = []
+    for _ in range(n):
+        pano = np.where(rng.random((2, 16, 64)) < 0.1, rng.random((2, 16, 64)), 0).astype(np.float32)
+        img = expand_panorama(pano, {"min": 0.0, "max": 1.0, "mean": float(pano.mean())})
+        radar = stack_pair(img[0], img[1])[None]
+        imu = (rng.normal(0, 1, (1, 20, 6)) + np.array([0, 0, 9.81, 0, 0, 0])).astype(np.float32)
+        feeds.append({"radar": radar.astype(np.float32), "imu": imu,
+                      "state": np.zeros((1, 4, hidden), np.float32)})
+    return feeds
+
+
+def quantize_model(fp32_path: str, out_path: str, feeds: list[dict], per_channel: bool = False,
+                   calibration: str = "dataset") -> float:
+    """Quantize, check the graph, copy metadata; returns max |int8 - fp32| pose diff over `feeds[:16]`."""
+    from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
+
+    class Reader(CalibrationDataReader):
+        def __init__(self):
+            self.it = iter(feeds)
+
+        def get_next(self):
+            return next(self.it, None)
+
+    quantize_static(fp32_path, out_path, Reader(), quant_format=QuantFormat.QOperator,
+                    activation_type=QuantType.QInt8, weight_type=QuantType.QInt8,
+                    op_types_to_quantize=["Conv", "MatMul"], per_channel=per_channel,
+                    extra_options={"ActivationSymmetric": True, "WeightSymmetric": True})
+    model = onnx.load(out_path)
+    problems = op_problems(model) + [f"nonzero zero point: {n}" for n in nonzero_zero_points(model)]
+    if problems:
+        raise RuntimeError(f"int8 graph breaks the tract recipe: {problems[:10]}")
+    meta = get_metadata(onnx.load(fp32_path))
+    meta.update(precision="int8", quantization={
+        "recipe": "onnxruntime quantize_static QOperator, s8 symmetric activations+weights, Conv+MatMul",
+        "per_channel": per_channel, "calibration": calibration, "calib_windows": len(feeds)})
+    set_metadata(model, meta)
+    onnx.save(model, out_path)
+    f32, i8 = ort_session(fp32_path), ort_session(out_path)
+    return float(max(np.abs(f32.run(["pose"], f)[0] - i8.run(["pose"], f)[0]).max() for f in feeds[:16]))
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description="int8-quantize a milliEgo ONNX model for tract")
+    p.add_argument("--model", required=True)
+    p.add_argument("--data", required=True, help="dataset directory (or authors' h5) for calibration")
+    p.add_argument("--out", required=True)
+    p.add_argument("--calib-windows", type=int, default=256)
+    p.add_argument("--per-channel", action="store_true")
+    a = p.parse_args(argv)
+    from .data import load_any
+    meta = get_metadata(onnx.load(a.model))
+    feeds = calibration_feeds(a.model, load_any(a.data), a.calib_windows, meta["stateful"], meta["hidden"])
+    diff = quantize_model(a.model, a.out, feeds, a.per_channel)
+    print(f"wrote {a.out}: int8 (QLinearConv/QLinearMatMul, symmetric s8), calibrated on {len(feeds)} windows "
+          f"of {a.data}; int8 vs fp32 pose max abs diff {diff:.3g}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,99 @@
+import json
+import subprocess
+
+import numpy as np
+import onnx
+import torch
+
+from conftest import PYTHON, subprocess_env
+from milliego_models.data import load_dataset
+from milliego_models.export import example_inputs, load_checkpoint
+from milliego_models.onnx_utils import ALLOWED_OPS, get_metadata, nonzero_zero_points, ort_session
+
+
+def run(*args):
+    r = subprocess.run([PYTHON, "-m", *map(str, args)], env=subprocess_env(), capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    return r.stdout
+
+
+def test_export_quantize_golden_roundtrip(stateful_run, datasets, tmp_path):
+    fp32, int8, gold = tmp_path / "m.onnx", tmp_path / "m8.onnx", tmp_path / "golden.safetensors"
+    out = run("milliego_models.export", "--checkpoint", stateful_run / "best.pt", "--out", fp32)
+    assert "max abs diff" in out
+    net, ck = load_checkpoint(str(stateful_run / "best.pt"))
+    H = net.hidden
+
+    model = onnx.load(fp32)
+    assert [i.name for i in model.graph.input] == ["radar", "imu", "state"]
+    assert [o.name for o in model.graph.output] == ["pose", "state_out"]
+    dims = {v.name: [d.dim_value for d in v.type.tensor_type.shape.dim]
+            for v in list(model.graph.input) + list(model.graph.output)}
+    assert dims == {"radar": [1, 6, 64, 256], "imu": [1, 20, 6], "state": [1, 4, H], "pose": [1, 6],
+                    "state_out": [1, 4, H]}
+    ops = {n.op_type for n in model.graph.node}
+    assert ops <= ALLOWED_OPS and "Gemm" not in ops and "LSTM" not in ops and "Pad" not in ops
+    meta = get_metadata(model)
+    assert meta["stateful"] is True and meta["trained"] is True and meta["precision"] == "fp32"
+    assert meta["hidden"] == H and meta["config"] == "tiny" and meta["preprocess"]["gap"] == 5
+    assert "norm" in meta and "label" in meta and meta["params"] > 0
+
+    # fp32 ONNX == PyTorch on a real window with a non-zero state.
+    d = load_dataset(datasets[1])
+    feed = {"radar": d.radar([3]), "imu": d.imu[[3]], "state": example_inputs(net)[2].numpy()}
+    with torch.no_grad():
+        ref = [t.numpy() for t in net(*(torch.from_numpy(feed[k]) for k in ("radar", "imu", "state")))]
+    got = ort_session(str(fp32)).run(None, feed)
+    for a, b in zip(ref, got):
+        np.testing.assert_allclose(b, a, atol=1e-4, rtol=0)
+
+    out = run("milliego_models.quantize", "--model", fp32, "--data", datasets[0], "--out", int8,
+              "--calib-windows", "32")
+    assert "max abs diff" in out
+    q = onnx.load(int8)
+    for n in q.graph.node:
+        assert n.domain in ("", "ai.onnx"), n
+        assert n.op_type in ALLOWED_OPS, n.op_type
+    qops = {n.op_type for n in q.graph.node}
+    assert {"QLinearConv", "QLinearMatMul", "QuantizeLinear", "DequantizeLinear"} <= qops
+    assert "Conv" not in qops and "MatMul" not in qops  # everything quantizable was quantized
+    assert nonzero_zero_points(q) == []
+    zps = [i for i in q.graph.initializer if i.name.endswith("zero_point")]
+    assert zps and all(onnx.numpy_helper.to_array(z).dtype == np.int8 for z in zps)
+    qmeta = get_metadata(q)
+    assert qmeta["precision"] == "int8" and qmeta["stateful"] is True
+    # int8 vs fp32: symmetric s8 gives each quantized tensor a step of range/254; ~60 quantized
+    # MatMul/Conv layers in series accumulate that to a few 1e-3 relative, so allow 0.02 + 5% of |pose|.
+    # The state must be one the model really reaches (calibration saw those ranges), so run the chain.
+    s32, s8 = ort_session(str(fp32)), ort_session(str(int8))
+    state = np.zeros((1, 4, H), np.float32)
+    for w in d.chains[0][:6]:
+        f = {"radar": d.radar([w]), "imu": d.imu[[w]], "state": state}
+        p32, state = s32.run(["pose", "state_out"], f)
+        p8 = s8.run(["pose"], f)[0]
+        assert np.abs(p8 - p32).max() <= 0.02 + 0.05 * np.abs(p32).max(), (p8, p32)
+
+    out = run("milliego_models.golden", "--fp32", fp32, "--int8", int8, "--data", datasets[1], "--out", gold,
+              "--windows", "3")
+    from safetensors import safe_open
+    with safe_open(str(gold), "numpy") as f:
+        keys = set(f.keys())
+        assert json.loads(f.metadata()["milliego"])["stateful"] is True
+        assert f.get_tensor("window_pair").dtype == np.int64
+        assert np.all(f.get_tensor("state_0") == 0)
+        np.testing.assert_array_equal(f.get_tensor("state_1"), f.get_tensor("state_out_fp32_0"))
+        assert not np.allclose(f.get_tensor("state_1"), 0)
+        wp = f.get_tensor("window_pair")
+        assert np.all(wp[1:, 0] == wp[:-1, 1])
+    for k in range(3):
+        for name in ("radar", "imu", "state", "pose_fp32", "state_out_fp32", "pose_int8", "state_out_int8"):
+            assert f"{name}_{k}" in keys
+
+
+def test_paper_graph_tiny_untrained(tmp_path):
+    out = run("milliego_models.paper_graph", "--out", tmp_path, "--config", "tiny", "--seed", "5",
+              "--calib-windows", "4")
+    assert "UNTRAINED (random, seed 5)" in out and "seeded random inputs" in out
+    meta = get_metadata(onnx.load(tmp_path / "milliego-tiny-int8.onnx"))
+    assert meta["trained"] is False and meta["precision"] == "int8"
