@@ -49,11 +49,14 @@ enum Column {
 }
 
 fn default_models() -> Vec<PathBuf> {
-    ["models/compact/model.onnx", "models/compact/model-int8.onnx"]
-        .iter()
-        .map(PathBuf::from)
-        .filter(|p| p.is_file())
-        .collect()
+    [
+        "models/compact/model.onnx",
+        "models/compact/model-int8.onnx",
+    ]
+    .iter()
+    .map(PathBuf::from)
+    .filter(|p| p.is_file())
+    .collect()
 }
 
 pub fn run(a: ScoreArgs) -> Result<()> {
@@ -67,7 +70,10 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         .take(a.limit.unwrap_or(usize::MAX))
         .collect();
     let mut estimators: Vec<(String, Column)> = vec![
-        ("IMU dead reckoning".into(), Column::Classical(Estimator::ImuOnly)),
+        (
+            "IMU dead reckoning".into(),
+            Column::Classical(Estimator::ImuOnly),
+        ),
         ("Doppler RIO".into(), Column::Classical(Estimator::Doppler)),
     ];
     let models = if a.no_model {
@@ -113,7 +119,11 @@ pub fn run(a: ScoreArgs) -> Result<()> {
                 }
                 Column::Model(m) => run_session(m, &s)?.trajectory,
             };
-            let rep = evaluate(&gt, &Trajectory::from_tum(&trajectory), &Settings::default())?;
+            let rep = evaluate(
+                &gt,
+                &Trajectory::from_tum(&trajectory),
+                &Settings::default(),
+            )?;
             out.push((rep.ate.mean, rep.ate_2d.mean, rep.final_drift_pct));
         }
     }

@@ -100,18 +100,25 @@ impl std::fmt::Display for ModelError {
 
 impl std::error::Error for ModelError {}
 
-type Plan = TypedSimplePlan;
-
 /// A loaded, optimised model with its LSTM state.
 #[derive(Debug)]
 pub struct Model {
     path: PathBuf,
     meta: ModelMeta,
-    plan: Plan,
+    /// One tract execution state, reused for every window (its buffers stay allocated).
+    exec: TypedSimpleState,
     state: Tensor,
     zero_state: Tensor,
     radar: Box<[f32; RADAR_LEN]>,
     steps: u64,
+}
+
+/// The values of an f32 tensor, in order.
+pub fn floats(t: &Tensor) -> Result<Vec<f32>, String> {
+    let v = t
+        .to_plain_array_view::<f32>()
+        .map_err(|e| format!("{e:#}"))?;
+    Ok(v.iter().copied().collect())
 }
 
 /// The ONNX file's `milliego` metadata, without building the graph.
@@ -134,7 +141,12 @@ fn meta_of(path: &Path, proto: &tract_onnx::pb::ModelProto) -> Result<ModelMeta,
         .metadata_props
         .iter()
         .find(|p| p.key == "milliego")
-        .ok_or_else(|| bad("no 'milliego' entry in metadata_props (not exported by milliego_models.export?)".into()))?;
+        .ok_or_else(|| {
+            bad(
+                "no 'milliego' entry in metadata_props (not exported by milliego_models.export?)"
+                    .into(),
+            )
+        })?;
     let meta: ModelMeta =
         serde_json::from_str(&entry.value).map_err(|e| bad(format!("milliego entry: {e}")))?;
     meta.preprocess.validate().map_err(bad)?;
@@ -196,7 +208,9 @@ impl Model {
             path: path.into(),
             why: format!("{e:#}"),
         };
-        let typed = model.into_optimized().map_err(|e| iface(format!("{e:#}")))?;
+        let typed = model
+            .into_optimized()
+            .map_err(|e| iface(format!("{e:#}")))?;
         let out_shapes: Vec<Vec<usize>> = typed
             .output_outlets()
             .map_err(run_err)?
@@ -215,13 +229,14 @@ impl Model {
             )));
         }
         let plan = typed.into_runnable().map_err(run_err)?;
+        let exec = TypedSimpleState::new(&plan).map_err(run_err)?;
         let zero_state = Tensor::zero::<f32>(&[1, STATE_ROWS, h]).map_err(run_err)?;
         Ok(Model {
             path: path.into(),
             meta,
             state: zero_state.clone(),
             zero_state,
-            plan,
+            exec,
             radar: Box::new([0.0; RADAR_LEN]),
             steps: 0,
         })
@@ -303,25 +318,25 @@ impl Model {
     /// Runs the graph once with explicit inputs (radar 1 x 6 x 64 x 256, IMU 1 x 20 x 6, state
     /// 1 x 4 x hidden); returns the pose and the new state. The model's own state is untouched.
     pub fn run_raw(
-        &self,
+        &mut self,
         radar: Tensor,
         imu: Tensor,
         state: Tensor,
     ) -> Result<([f32; 6], Tensor), ModelError> {
-        let mut out = self
-            .plan
-            .run(tvec![radar.into(), imu.into(), state.into()])
-            .map_err(|e| self.run_err(format!("{e:#}")))?;
-        let state_out = out.pop().ok_or_else(|| self.run_err("no state output".into()))?;
-        let pose_t = out.pop().ok_or_else(|| self.run_err("no pose output".into()))?;
-        let p = pose_t
-            .as_slice::<f32>()
-            .map_err(|e| self.run_err(format!("{e:#}")))?;
+        let result = self.exec.run(tvec![radar.into(), imu.into(), state.into()]);
+        let mut out = result.map_err(|e| self.run_err(format!("{e:#}")))?;
+        let state_out = out
+            .pop()
+            .ok_or_else(|| self.run_err("no state output".into()))?;
+        let pose_t = out
+            .pop()
+            .ok_or_else(|| self.run_err("no pose output".into()))?;
+        let p = floats(&pose_t.into_tensor()).map_err(|e| self.run_err(e))?;
         if p.len() != 6 {
             return Err(self.run_err(format!("pose has {} values", p.len())));
         }
         let mut pose = [0.0f32; 6];
-        pose.copy_from_slice(p);
+        pose.copy_from_slice(&p);
         if !pose.iter().all(|v| v.is_finite()) {
             return Err(self.run_err(format!("non-finite pose {pose:?}")));
         }

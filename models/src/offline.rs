@@ -69,7 +69,8 @@ pub fn run_session(model: &mut Model, session: &Session) -> Result<ModelRun, Run
         }
         let from = match last {
             None => {
-                run.trajectory.push(to_tum(w.t_prev, &Isometry3::identity()));
+                run.trajectory
+                    .push(to_tum(w.t_prev, &Isometry3::identity()));
                 Isometry3::identity()
             }
             Some((seq, pose)) if seq == w.prev_seq => pose,

@@ -215,10 +215,10 @@ pub fn shard_from_session(session: &Session, pre: &Config) -> Result<Shard, Data
             why: "no ground truth: a training dataset needs labels".into(),
         })?;
     let mut shard = Shard {
-        session: session
-            .dir
-            .file_name()
-            .map_or_else(|| session.dir.display().to_string(), |n| n.to_string_lossy().into()),
+        session: session.dir.file_name().map_or_else(
+            || session.dir.display().to_string(),
+            |n| n.to_string_lossy().into(),
+        ),
         ..Shard::default()
     };
     let fed = feed_session(session, pre, &mut |ev| match ev {

@@ -143,7 +143,8 @@ impl WindowBuilder {
     /// A builder; fails with a message naming the bad setting.
     pub fn new(cfg: BuilderConfig) -> Result<WindowBuilder, String> {
         cfg.pre.validate()?;
-        if cfg.max_imu_gap_s.is_nan() || cfg.max_imu_gap_s <= 0.0 || cfg.imu_capacity < 2 * IMU_LEN {
+        if cfg.max_imu_gap_s.is_nan() || cfg.max_imu_gap_s <= 0.0 || cfg.imu_capacity < 2 * IMU_LEN
+        {
             return Err(format!(
                 "window builder: max_imu_gap_s {} must be > 0 and imu_capacity {} at least {}",
                 cfg.max_imu_gap_s,

@@ -38,6 +38,9 @@ def golden(fp32: str, int8: str, data, windows: int, chain: int | None = None) -
         feed = {"radar": data.radar([w]).astype(np.float32), "imu": data.imu[[w]].astype(np.float32), "state": state}
         pose, state_out = f32.run(["pose", "state_out"], feed)
         pose8, state_out8 = i8.run(["pose", "state_out"], feed)
+        p = data.pair[w]
+        out |= {f"panorama_prev_{k}": data.frames[p[0]][None].astype(np.float32),
+                f"panorama_cur_{k}": data.frames[p[1]][None].astype(np.float32)}
         out |= {f"radar_{k}": feed["radar"], f"imu_{k}": feed["imu"], f"state_{k}": feed["state"],
                 f"pose_fp32_{k}": pose, f"state_out_fp32_{k}": state_out,
                 f"pose_int8_{k}": pose8, f"state_out_int8_{k}": state_out8}
@@ -58,6 +61,8 @@ def main(argv=None) -> int:
 
     from .data import load_any
     data = load_any(a.data)
+    # Images through the model's own normalisation (what the runtime uses), not this dataset's.
+    data.norm = get_metadata(onnx.load(a.fp32))["norm"] or data.norm
     t = golden(a.fp32, a.int8, data, a.windows, a.chain)
     meta = get_metadata(onnx.load(a.fp32))
     save_file(t, a.out, metadata={"milliego": json.dumps(meta, sort_keys=True), "windows": str(a.windows),

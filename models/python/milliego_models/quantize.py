@@ -102,7 +102,10 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     from .data import load_any
     meta = get_metadata(onnx.load(a.model))
-    feeds = calibration_feeds(a.model, load_any(a.data), a.calib_windows, meta["stateful"], meta["hidden"])
+    data = load_any(a.data)
+    if meta.get("norm"):
+        data.norm = meta["norm"]  # calibrate on what the runtime will feed: the model's normalisation
+    feeds = calibration_feeds(a.model, data, a.calib_windows, meta["stateful"], meta["hidden"])
     diff = quantize_model(a.model, a.out, feeds, a.per_channel)
     print(f"wrote {a.out}: int8 (QLinearConv/QLinearMatMul, symmetric s8), calibrated on {len(feeds)} windows "
           f"of {a.data}; int8 vs fp32 pose max abs diff {diff:.3g}")

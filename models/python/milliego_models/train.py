@@ -193,6 +193,8 @@ def main(argv=None) -> int:
 
     train = load_any(args.data, args.max_windows)
     val = load_any(args.val, args.max_val_windows)
+    # The model sees every image through the TRAINING set's normalisation (it ships with the model).
+    val.norm = train.norm
     stateful = args.mode == "stateful"
     gamma = auto_gamma(train.label) if args.gamma == "auto" else float(args.gamma)
     log(f"train {len(train)} windows ({len(train.chains)} chains), val {len(val)} windows, "

@@ -1,0 +1,187 @@
+//! The shipped model (models/compact) in tract against the golden bundle written by
+//! `python -m milliego_models.golden` with onnxruntime: the preprocessing expansion is bit-exact
+//! with the trainer's, fp32 outputs agree to 1e-4 and int8 outputs stay within the int8 tolerance.
+//! `MILLIEGO_MODEL_DIR` points the test at another model directory.
+
+use milliego_models::{floats, read_meta, Model};
+use milliego_preprocess::panorama::radar_tensor;
+use milliego_preprocess::{IMU_LEN, PANO_LEN, RADAR_LEN};
+use safetensors::SafeTensors;
+use std::path::PathBuf;
+use tract_onnx::prelude::Tensor;
+
+fn model_dir() -> PathBuf {
+    std::env::var_os("MILLIEGO_MODEL_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("compact"))
+}
+
+fn f32s(st: &SafeTensors<'_>, name: &str) -> Vec<f32> {
+    let t = st
+        .tensor(name)
+        .unwrap_or_else(|e| panic!("golden bundle lacks {name}: {e}"));
+    assert_eq!(t.dtype(), safetensors::Dtype::F32, "{name}");
+    t.data()
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect()
+}
+
+fn windows(st: &SafeTensors<'_>) -> usize {
+    (0..)
+        .take_while(|k| st.tensor(&format!("radar_{k}")).is_ok())
+        .count()
+}
+
+fn max_abs(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+}
+
+fn imu_rows(v: &[f32]) -> [[f32; 6]; IMU_LEN] {
+    let mut out = [[0.0; 6]; IMU_LEN];
+    for (row, src) in out.iter_mut().zip(v.chunks_exact(6)) {
+        row.copy_from_slice(src);
+    }
+    out
+}
+
+#[test]
+fn preprocessing_expansion_is_bit_exact_with_the_trainer() {
+    let dir = model_dir();
+    let bytes = std::fs::read(dir.join("golden.safetensors")).expect("golden bundle");
+    let st = SafeTensors::deserialize(&bytes).unwrap();
+    let meta = read_meta(&dir.join("model.onnx")).unwrap();
+    let n = windows(&st);
+    assert!(n >= 2, "golden bundle has {n} windows");
+    for k in 0..n {
+        let prev: [f32; PANO_LEN] = f32s(&st, &format!("panorama_prev_{k}")).try_into().unwrap();
+        let cur: [f32; PANO_LEN] = f32s(&st, &format!("panorama_cur_{k}")).try_into().unwrap();
+        let mut ours = Box::new([0.0f32; RADAR_LEN]);
+        radar_tensor(&prev, &cur, &meta.norm, &mut ours);
+        let theirs = f32s(&st, &format!("radar_{k}"));
+        let differing = ours
+            .iter()
+            .zip(&theirs)
+            .filter(|(a, b)| a.to_bits() != b.to_bits())
+            .count();
+        assert_eq!(
+            differing, 0,
+            "window {k}: {differing} of {RADAR_LEN} values differ"
+        );
+        assert!(
+            prev.iter().any(|v| *v > 0.0),
+            "window {k} has an empty panorama"
+        );
+    }
+}
+
+#[test]
+fn tract_matches_onnxruntime_on_the_golden_windows() {
+    let dir = model_dir();
+    let bytes = std::fs::read(dir.join("golden.safetensors")).expect("golden bundle");
+    let st = SafeTensors::deserialize(&bytes).unwrap();
+    let n = windows(&st);
+    for (file, key, tol) in [
+        ("model.onnx", "fp32", 1e-4f32),
+        // tract and onnxruntime round int8 intermediates differently in places; the int8
+        // tolerance (as for int8 vs fp32) bounds the difference.
+        ("model-int8.onnx", "int8", 2e-2),
+    ] {
+        let mut m = Model::load(
+            &dir.join(file),
+            Some(&milliego_preprocess::Config::default()),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(m.meta().precision, key);
+        assert!(m.meta().trained, "the shipped model is trained");
+        let h = m.meta().hidden;
+        let mut worst = 0.0f32;
+        for k in 0..n {
+            let radar = f32s(&st, &format!("radar_{k}"));
+            let imu = imu_rows(&f32s(&st, &format!("imu_{k}")));
+            let state = f32s(&st, &format!("state_{k}"));
+            let radar_t = m.tensor(&[1, 6, 64, 256], &radar).unwrap();
+            let imu_t = m.tensor(&[1, IMU_LEN, 6], imu.as_flattened()).unwrap();
+            let state_t = Tensor::from_shape(&[1, 4, h], &state).unwrap();
+            let (pose, state_out) = m.run_raw(radar_t, imu_t, state_t).unwrap();
+            let want = f32s(&st, &format!("pose_{key}_{k}"));
+            let d = max_abs(&pose, &want);
+            worst = worst.max(d);
+            assert!(
+                d <= tol,
+                "{file} window {k}: pose {pose:?} vs onnxruntime {want:?} (diff {d})"
+            );
+            let want_state = f32s(&st, &format!("state_out_{key}_{k}"));
+            let ds = max_abs(&floats(&state_out).unwrap(), &want_state);
+            assert!(ds <= tol * 5.0, "{file} window {k}: state differs by {ds}");
+            // And against fp32: the int8 model must stay close to the model it came from.
+            let fp = f32s(&st, &format!("pose_fp32_{k}"));
+            assert!(
+                max_abs(&pose, &fp) <= 5e-2,
+                "{file} window {k}: {pose:?} vs fp32 {fp:?}"
+            );
+        }
+        eprintln!("{file}: worst pose difference to onnxruntime {worst:.2e} over {n} windows");
+    }
+}
+
+#[test]
+fn stepping_carries_state_only_for_stateful_models() {
+    let dir = model_dir();
+    let bytes = std::fs::read(dir.join("golden.safetensors")).expect("golden bundle");
+    let st = SafeTensors::deserialize(&bytes).unwrap();
+    let mut m = Model::load(&dir.join("model.onnx"), None).unwrap();
+    let radar = f32s(&st, "radar_1");
+    let imu = imu_rows(&f32s(&st, "imu_1"));
+    let first = m.step_tensors(&radar, &imu).unwrap();
+    let second = m.step_tensors(&radar, &imu).unwrap();
+    if m.meta().stateful {
+        assert_ne!(
+            first, second,
+            "a stateful model's second step sees a new state"
+        );
+        m.reset();
+        assert_eq!(
+            m.step_tensors(&radar, &imu).unwrap(),
+            first,
+            "reset restores the zero state"
+        );
+    } else {
+        assert_eq!(
+            first, second,
+            "a stateless model gives the same output for the same input"
+        );
+    }
+    assert_eq!(m.steps(), if m.meta().stateful { 3 } else { 2 });
+}
+
+#[test]
+fn bad_model_files_stop_with_a_clear_message() {
+    let dir = tempfile_dir();
+    let junk = dir.join("junk.onnx");
+    std::fs::write(&junk, b"not an onnx file").unwrap();
+    let e = Model::load(&junk, None).unwrap_err().to_string();
+    assert!(e.contains("junk.onnx") && e.contains("cannot load"), "{e}");
+    let missing = dir.join("missing.onnx");
+    let e = Model::load(&missing, None).unwrap_err().to_string();
+    assert!(e.contains("missing.onnx"), "{e}");
+    // A model trained with other preprocessing settings is refused at load.
+    let other = milliego_preprocess::Config {
+        gap: 3,
+        ..milliego_preprocess::Config::default()
+    };
+    let e = Model::load(&model_dir().join("model.onnx"), Some(&other))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("interface mismatch") && e.contains("gap"), "{e}");
+}
+
+fn tempfile_dir() -> PathBuf {
+    let d = std::env::temp_dir().join(format!("milliego-models-test-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
