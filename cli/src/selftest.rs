@@ -1,7 +1,10 @@
 //! `milliego selftest`: a single-threaded self-check for cross-built binaries (qemu-user runs
 //! single-threaded programs only). It decodes fixed vectors built by the encoders and, when
-//! present, the shared captures, and prints one digest per check. The same binary built for two
-//! architectures must print identical output; CI diffs the native run against qemu-aarch64.
+//! present, the shared captures, and prints one digest per check; it runs the preprocessing on fixed
+//! frames (digested) and the shipped fp32 and int8 models on their golden windows (outputs with
+//! their distance to onnxruntime's). The same binary built for two architectures must print
+//! identical digests and model outputs within the int8 tolerance; CI compares the native run
+//! against qemu-aarch64 (scripts/compare-selftest.py).
 
 use clap::Args;
 use imu_driver::{DataId, DataKind, Message, MtData2Writer, Precision, BID_MASTER};
@@ -19,6 +22,9 @@ pub struct SelftestArgs {
     /// Directory holding ti-mmwave/ and xsens/ captures (default: ../shared/captures if present).
     #[arg(long)]
     captures: Option<PathBuf>,
+    /// Directory of the shipped model: model.onnx, model-int8.onnx, golden.safetensors.
+    #[arg(long, default_value = "models/compact")]
+    model_dir: PathBuf,
 }
 
 /// FNV-1a, 64 bit: a digest that is the same on every architecture.
@@ -256,8 +262,105 @@ fn pose_digest() -> Value {
     json!({"digest": h.hex(), "messages": 10})
 }
 
+/// Preprocessing on fixed synthetic frames: panoramas, IMU windows and the radar tensor, digested
+/// bit for bit (the same code path as training export and the runtime).
+fn preprocess_digest() -> Result<Value> {
+    use milliego_preprocess::window::{BuilderConfig, WindowBuilder};
+    let mut b = WindowBuilder::new(BuilderConfig::default())?;
+    let mut h = Fnv::new();
+    let mut tensor = Box::new([0.0f32; milliego_preprocess::RADAR_LEN]);
+    let norm = milliego_preprocess::Norm {
+        min: 0.0,
+        max: 0.99,
+        mean: 0.027,
+    };
+    let mut windows = 0u64;
+    let mut imu_t = 0.0f64;
+    for n in 1..=20u32 {
+        let t = f64::from(n) * 0.05;
+        while imu_t <= t {
+            b.push_imu(imu_t, [0.1 * imu_t, 0.02, 9.81], [0.0, 0.01, 0.3 * imu_t]);
+            imu_t += 0.0025;
+        }
+        let points: Vec<radar_driver::tlv::Point> = (0..40)
+            .map(|i| {
+                let a = f32::from(i as u8) * 0.37 + n as f32 * 0.01;
+                radar_driver::tlv::Point {
+                    x: 4.0 * a.sin(),
+                    y: 1.0 + 6.0 * (a * 0.5).cos().abs(),
+                    z: 0.3 * (a * 1.7).sin(),
+                    velocity: -0.5,
+                }
+            })
+            .collect();
+        if let Some(p) = b.push_radar(n, t, &points) {
+            p.iter().for_each(|v| h.f32(*v));
+        }
+        while let Some(w) = b.poll() {
+            windows += 1;
+            w.imu.iter().flatten().for_each(|v| h.f32(*v));
+            w.radar_tensor(&norm, &mut tensor);
+            tensor.iter().for_each(|v| h.f32(*v));
+        }
+    }
+    Ok(json!({"digest": h.hex(), "windows": windows}))
+}
+
+/// The shipped fp32 and int8 models on the golden windows: outputs and their distance to the
+/// onnxruntime outputs stored with the model. Floating-point kernels differ between architectures,
+/// so these are compared within a tolerance (scripts/cross-check), not digested.
+fn model_checks(dir: &std::path::Path, checks: &mut Map<String, Value>) -> Result<bool> {
+    let golden = dir.join("golden.safetensors");
+    if !golden.is_file() {
+        eprintln!("milliego selftest: skipped model: no {}", golden.display());
+        return Ok(true);
+    }
+    let bytes = std::fs::read(&golden).map_err(|e| format!("{}: {e}", golden.display()))?;
+    let st = safetensors::SafeTensors::deserialize(&bytes)
+        .map_err(|e| format!("{}: {e}", golden.display()))?;
+    let f32s = |name: &str| -> Result<Vec<f32>> {
+        let t = st
+            .tensor(name)
+            .map_err(|e| format!("{}: {name}: {e}", golden.display()))?;
+        Ok(t.data()
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect())
+    };
+    let windows = (0..)
+        .take_while(|k| st.tensor(&format!("radar_{k}")).is_ok())
+        .count();
+    let mut all_ok = true;
+    for (file, key, tol) in [("model.onnx", "fp32", 1e-4f64), ("model-int8.onnx", "int8", 2e-2)] {
+        let mut m = milliego_models::Model::load(&dir.join(file), None)?;
+        let h = m.meta().hidden;
+        let mut outputs = Vec::new();
+        let mut worst = 0.0f64;
+        for k in 0..windows {
+            let radar = m.tensor(&[1, 6, 64, 256], &f32s(&format!("radar_{k}"))?)?;
+            let imu = m.tensor(&[1, 20, 6], &f32s(&format!("imu_{k}"))?)?;
+            let state = m.tensor(&[1, 4, h], &f32s(&format!("state_{k}"))?)?;
+            let (pose, _) = m.run_raw(radar, imu, state)?;
+            let want = f32s(&format!("pose_{key}_{k}"))?;
+            for (a, b) in pose.iter().zip(&want) {
+                worst = worst.max(f64::from((a - b).abs()));
+            }
+            outputs.extend(pose.iter().map(|v| f64::from(*v)));
+        }
+        let ok = worst <= tol;
+        all_ok &= ok;
+        checks.insert(
+            format!("model_{key}"),
+            json!({"outputs": outputs, "tolerance": tol, "max_abs_diff_to_onnxruntime": worst, "ok": ok}),
+        );
+    }
+    Ok(all_ok)
+}
+
 pub fn run(a: SelftestArgs) -> Result<()> {
     let mut checks = Map::new();
+    checks.insert("preprocess_vectors".into(), preprocess_digest()?);
+    let models_ok = model_checks(&a.model_dir, &mut checks)?;
     checks.insert("radar_vectors".into(), radar_digest(&radar_vectors()));
     checks.insert("imu_vectors".into(), imu_digest(&imu_vectors()?));
     checks.insert("pose_link_vectors".into(), pose_digest());
@@ -313,5 +416,8 @@ pub fn run(a: SelftestArgs) -> Result<()> {
         "{}",
         serde_json::to_string_pretty(&json!({"selftest": 1, "checks": checks}))?
     );
+    if !models_ok {
+        return Err("model outputs differ from the golden bundle beyond tolerance".into());
+    }
     Ok(())
 }
