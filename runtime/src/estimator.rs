@@ -172,11 +172,12 @@ impl Default for ClassicalConfig {
     }
 }
 
-/// Radar frame seen while levelling, applied once the filter starts.
-#[derive(Debug, Clone, Copy)]
+/// Radar frame seen while levelling, measured and applied once the filter starts.
+#[derive(Debug, Clone)]
 struct Early {
     t: f64,
-    m: Option<VelocityMeasurement>,
+    frame_number: u32,
+    points: Vec<radar_driver::host::Point>,
 }
 
 /// Doppler radar-inertial odometry (or, with `use_radar = false`, IMU dead reckoning): the
@@ -320,23 +321,77 @@ impl Classical {
             .fold(Vector3::zeros(), |a, s| a + Vector3::from(s.accel))
             / n;
         let t0 = self.level[0].t;
-        let mut rio = Rio::levelled(self.cfg.rio, self.mount, t0, mean_f.into());
-        // Replay as the offline runner orders it: frames due at or before a sample go first.
+        self.rio = Some(Rio::levelled(self.cfg.rio, self.mount, t0, mean_f.into()));
+        // Replay as the offline runner orders it: frames due at or before a sample go first,
+        // measured with the prior the filter has at that point.
+        let early = std::mem::take(&mut self.early);
+        let level = std::mem::take(&mut self.level);
         let mut next = 0;
-        for s in &self.level {
-            while next < self.early.len() && self.early[next].t <= s.t {
-                if let Some(m) = self.early[next].m {
-                    if self.early[next].t >= t0 {
-                        rio.push_velocity(m);
-                    }
-                }
+        for s in &level {
+            while next < early.len() && early[next].t <= s.t {
+                let e = &early[next];
                 next += 1;
+                if e.t < t0 {
+                    continue;
+                }
+                let f = RadarInput {
+                    t: e.t,
+                    frame_number: e.frame_number,
+                    points: &e.points,
+                };
+                self.radar_update(&f, self.current_prior());
             }
+            let Some(rio) = self.rio.as_mut() else {
+                return;
+            };
+            let before = *rio.counters();
             rio.push_imu(*s);
+            let after = rio.counters();
+            if after.updates > before.updates {
+                self.rejected_in_row = 0;
+            } else if after.gated > before.gated {
+                self.rejected_in_row += 1;
+            }
         }
+        self.early = early;
         self.early.clear();
+        self.level = level;
         self.level.clear();
-        self.rio = Some(rio);
+    }
+
+    /// The filter's prior for the next frame, when it is healthy (as the offline runner).
+    fn current_prior(&self) -> Option<([f64; 3], [[f64; 3]; 3])> {
+        let rio = self.rio.as_ref()?;
+        (rio.counters().updates >= 10 && self.rejected_in_row < 3)
+            .then(|| rio.predicted_radar_velocity())
+    }
+
+    /// Ego-velocity of `f` guided by `prior`, pushed into the filter; tracks rejections.
+    fn radar_update(&mut self, f: &RadarInput<'_>, prior: Option<([f64; 3], [[f64; 3]; 3])>) {
+        let gate = self.cfg.rio.gate;
+        let prior = prior.map(|(velocity, covariance)| Prior {
+            velocity,
+            covariance,
+            gate,
+        });
+        let healthy = prior.is_some();
+        let m = self.ego_measure(f, prior);
+        let no_consensus = matches!(self.est.status, Status::NoConsensus { .. });
+        if let Some(rio) = self.rio.as_mut() {
+            let before = *rio.counters();
+            if let Some(m) = m {
+                rio.push_velocity(m);
+            }
+            let after = rio.counters();
+            if after.updates > before.updates {
+                self.rejected_in_row = 0;
+            } else if after.gated > before.gated {
+                self.rejected_in_row += 1;
+            }
+        }
+        if no_consensus {
+            self.rejected_in_row += u32::from(healthy);
+        }
     }
 
     fn restart_after_imu_gap(&mut self, s: &ImuSample) {
@@ -394,8 +449,11 @@ impl Estimator for Classical {
         if self.rio.is_none() {
             // Levelling: measure now (no prior before 10 updates anyway), apply at the start.
             if self.use_radar && self.early.len() < self.early.capacity() {
-                let m = self.ego_measure(f, None);
-                self.early.push(Early { t: f.t, m });
+                self.early.push(Early {
+                    t: f.t,
+                    frame_number: f.frame_number,
+                    points: f.points.to_vec(),
+                });
             }
             return Ok(None);
         }
@@ -418,32 +476,12 @@ impl Estimator for Classical {
             self.dr = Some(st);
             self.radar_only += 1;
         } else if self.use_radar {
-            let prior = self
-                .healthy_before
-                .then_some(())
-                .and(self.prior_before)
-                .map(|(velocity, covariance)| Prior {
-                    velocity,
-                    covariance,
-                    gate: self.cfg.rio.gate,
-                });
-            let healthy = prior.is_some();
-            let m = self.ego_measure(f, prior);
-            let no_consensus = matches!(self.est.status, Status::NoConsensus { .. });
-            if let Some(rio) = self.rio.as_mut() {
-                let before = *rio.counters();
-                if let Some(m) = m {
-                    rio.push_velocity(m);
-                }
-                let after = rio.counters();
-                if after.updates > before.updates {
-                    self.rejected_in_row = 0;
-                } else if after.gated > before.gated {
-                    self.rejected_in_row += 1;
-                } else if no_consensus {
-                    self.rejected_in_row += u32::from(healthy);
-                }
-            }
+            let prior = if self.healthy_before {
+                self.prior_before
+            } else {
+                None
+            };
+            self.radar_update(f, prior);
         }
         let Some((_, body, v)) = self.body_state() else {
             return Ok(None);
