@@ -81,6 +81,9 @@ pub struct RunArgs {
     /// Stop when no sensor byte arrived for this many seconds (once data has flowed).
     #[arg(long)]
     idle_exit: Option<f64>,
+    /// Sessions: align the clocks with the online synchroniser instead of the whole-session fit.
+    #[arg(long, requires = "session")]
+    online_clock: bool,
     /// More logging (-v info, -vv debug); RUST_LOG overrides.
     #[arg(short, long, action = clap::ArgAction::Count)]
     verbose: u8,
@@ -137,6 +140,7 @@ pub fn run(a: RunArgs) -> Result<()> {
         .unwrap_or(!offline);
     cfg.tum_predicted = a.tum_predicted || file.tum_predicted.unwrap_or(false);
     cfg.duration_s = a.duration;
+    cfg.session_online_clock = a.online_clock;
     cfg.idle_exit_s = a.idle_exit;
     if let Some(s) = file.sync.stall_periods {
         cfg.sync.stall_periods = s;

@@ -321,6 +321,7 @@ impl Classical {
             .fold(Vector3::zeros(), |a, s| a + Vector3::from(s.accel))
             / n;
         let t0 = self.level[0].t;
+        tracing::debug!(t0, samples = self.level.len(), t_last = self.level[self.level.len() - 1].t, early = self.early.len(), mean_f = ?mean_f, "levelled; filter starts");
         self.rio = Some(Rio::levelled(self.cfg.rio, self.mount, t0, mean_f.into()));
         // Replay as the offline runner orders it: frames due at or before a sample go first,
         // measured with the prior the filter has at that point.

@@ -80,6 +80,9 @@ pub struct RunConfig {
     pub idle_exit_s: Option<f64>,
     /// First reopen backoff \[s\].
     pub reopen_backoff_s: f64,
+    /// Sessions: align the clocks with the online synchroniser (from the recorded host
+    /// stamps) instead of the whole-session fit.
+    pub session_online_clock: bool,
 }
 
 impl Default for RunConfig {
@@ -92,10 +95,11 @@ impl Default for RunConfig {
             tum_predicted: false,
             classical: ClassicalConfig::default(),
             sync: SyncConfig::default(),
-            queues: [8, 512, 1024, 1024],
+            queues: [32, 512, 1024, 1024],
             duration_s: None,
             idle_exit_s: None,
             reopen_backoff_s: 0.05,
+            session_online_clock: false,
         }
     }
 }
@@ -161,6 +165,8 @@ struct Shared {
     sync_dropped: AtomicU64,
     epoch: Instant,
     last_data_ns: AtomicU64,
+    /// Sessions: common-clock time up to which the feeder has pushed everything (f64 bits).
+    watermark: AtomicU64,
 }
 
 impl Shared {
@@ -207,6 +213,13 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
             {
                 cfg.classical.ego.sigma = d.velocity_resolution_mps as f32 / 2.0;
                 cfg.sync.radar_period_s = Some(d.frame_period_ms / 1e3);
+                cfg.sync.half_chirps_s = d.active_frame_time_ms / 2e3;
+            }
+            if let Some(r) = &s.meta.radar {
+                cfg.sync.radar_baud = r.baud;
+            }
+            if let Some(i) = &s.meta.imu {
+                cfg.sync.imu_baud = i.baud;
             }
             cfg.sync.radar_enabled = s.radar.is_some();
             cfg.sync.imu_enabled = s.imu.is_some();
@@ -254,6 +267,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         sync_dropped: AtomicU64::new(0),
         epoch: Instant::now(),
         last_data_ns: AtomicU64::new(0),
+        watermark: AtomicU64::new(f64::NEG_INFINITY.to_bits()),
     });
     let offline = session.is_some();
 
@@ -275,11 +289,12 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         }
         let clock = milliego_session::streams::SessionClock::fit(&s, &frames, &imu)
             .map_err(|e| err(e.to_string()))?;
+        let online_clock = cfg.session_online_clock;
         input_threads.push(
             std::thread::Builder::new()
                 .name("feeder".into())
                 .spawn(move || {
-                    feed_session(&sh2, &frames, &imu, &clock, realtime, &dec);
+                    feed_session(&sh2, &frames, &imu, &clock, realtime, online_clock, &dec);
                 })
                 .map_err(|e| err(e.to_string()))?,
         );
@@ -395,27 +410,34 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
 
     // Synchroniser.
     let sync_cfg = cfg.sync;
+    let session_online_clock = cfg.session_online_clock;
     let sh2 = Arc::clone(&sh);
     let sync_thread = std::thread::Builder::new().name("sync".into()).spawn(move || {
         let mut sync = Synchroniser::new(sync_cfg);
-        sync.offline_clock = offline;
+        sync.offline_clock = offline && !session_online_clock;
+        sync.data_time = offline;
         let mut hist = Histogram::default();
         let mut data_now = f64::NEG_INFINITY;
         loop {
             let done = sh2.inputs_done.load(Ordering::Acquire);
+            let watermark = f64::from_bits(sh2.watermark.load(Ordering::Acquire));
             let mut any = false;
             // IMU first: a radar frame pushed before these samples is then visible below.
-            while let Some(s) = sh2.imu_q.pop() {
+            // Bounded batches: a fast producer must not keep one drain going while the other
+            // queue fills.
+            for _ in 0..sh2.imu_q.len() {
+                let Some(s) = sh2.imu_q.pop() else { break };
                 data_now = data_now.max(s.host_s);
                 sync.push_imu(s);
                 any = true;
             }
-            while let Some(r) = sh2.radar_q.pop() {
+            for _ in 0..sh2.radar_q.len() {
+                let Some(r) = sh2.radar_q.pop() else { break };
                 data_now = data_now.max(r.host_s);
                 sync.push_radar(r, |b| sh2.pool.give(b));
                 any = true;
             }
-            let now = if offline { data_now } else { sh2.epoch.elapsed().as_secs_f64() };
+            let now = if offline { watermark } else { sh2.epoch.elapsed().as_secs_f64() };
             let emit = |ev: SyncOut| {
                 let read_ns = match &ev {
                     SyncOut::Imu { read_ns, .. } => Some(*read_ns),
@@ -616,7 +638,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         "drops": {"radar_queue": sh.radar_q.dropped(), "imu_queue": sh.imu_q.dropped(), "sync_buffers": sync_counters.dropped,
                   "event_queue": sh.ev_q.dropped(), "pose_queue": sh.pose_q.dropped(), "total": dropped_total},
         "sync": {"radar_released": sync_counters.radar, "imu_released": sync_counters.imu, "radar_late": sync_counters.radar_late,
-                 "radar_gaps": sync_counters.radar_gaps, "imu_gaps": sync_counters.imu_gaps, "clocks": clocks},
+                 "radar_gaps": sync_counters.radar_gaps, "warmup_held": sync_counters.warmup, "imu_gaps": sync_counters.imu_gaps, "clocks": clocks},
         "ports": {"radar_reopens": radar_stats.reopens.load(Ordering::Relaxed), "imu_reopens": imu_stats.reopens.load(Ordering::Relaxed),
                   "radar_bytes": radar_stats.bytes.load(Ordering::Relaxed), "imu_bytes": imu_stats.bytes.load(Ordering::Relaxed)},
         "latency": {"sync": latency.sync.to_json(), "estimate": latency.estimate.to_json(), "output": latency.output.to_json(),
@@ -641,6 +663,7 @@ fn feed_session(
     imu: &[milliego_session::streams::ImuSample],
     clock: &milliego_session::streams::SessionClock,
     realtime: bool,
+    online_clock: bool,
     decoded: &[AtomicU64; 2],
 ) {
     let mut radar: Vec<(f64, usize)> = frames
@@ -673,8 +696,11 @@ fn feed_session(
         it.sensor_s = f.sensor_s;
         it.frame_number = f.frame_number;
         it.bytes = f.bytes;
-        it.processing_s = 0.0;
-        it.t = Some(tr);
+        it.processing_s = f
+            .cloud
+            .stats
+            .map_or(0.0, |s| f64::from(s.inter_frame_processing_time_us) * 1e-6);
+        it.t = (!online_clock).then_some(tr);
         it.points.clear();
         it.points.extend_from_slice(&f.cloud.points);
         let mut it = it;
@@ -683,6 +709,7 @@ fn feed_session(
             std::thread::sleep(Duration::from_micros(50));
         }
         decoded[0].fetch_add(1, Ordering::Relaxed);
+        sh.watermark.store(tr.to_bits(), Ordering::Release);
     };
     let mut next = 0;
     for s in imu {
@@ -703,13 +730,14 @@ fn feed_session(
             accel: s.accel,
             gyro: s.gyro,
             bytes: s.bytes,
-            t: Some(t),
+            t: (!online_clock).then_some(t),
         };
         while let Err(back) = sh.imu_q.try_push(it) {
             it = back;
             std::thread::sleep(Duration::from_micros(50));
         }
         decoded[1].fetch_add(1, Ordering::Relaxed);
+        sh.watermark.store(t.to_bits(), Ordering::Release);
     }
     for &(tr, i) in &radar[next..] {
         pace(tr);

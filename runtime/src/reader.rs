@@ -243,6 +243,9 @@ impl Source for SerialSource {
             .timeout(Duration::from_millis(20))
             .open()
             .map_err(io::Error::from)?;
+        // Bytes that waited in the driver before we opened carry no usable host time: a
+        // backlog read in one burst would look like a second of data arriving at once.
+        let _ = p.clear(serialport::ClearBuffer::Input);
         Ok(Box::new(p))
     }
 }

@@ -285,6 +285,8 @@ pub struct SyncCounters {
     pub radar_gaps: u64,
     /// Times the IMU was declared missing.
     pub imu_gaps: u64,
+    /// Items held while the clocks were not yet synchronised (start-up), re-timed after.
+    pub warmup: u64,
 }
 
 /// Puts both streams on one clock and releases them in time order: each radar frame right after
@@ -310,8 +312,13 @@ pub struct Synchroniser {
     imu_missing: bool,
     last_tick: f64,
     imu_done_t: Option<f64>,
+    released_t: f64,
+    retimed: bool,
+    last_imu_seen: Option<f64>,
     /// Set when items carry precomputed times from an offline clock fit.
     pub offline_clock: bool,
+    /// Set for sessions: stalls are judged on the streams' data times, not on arrival.
+    pub data_time: bool,
     /// Counters.
     pub counters: SyncCounters,
 }
@@ -326,8 +333,8 @@ impl Synchroniser {
                 refit_every: 10,
                 ..cfg.clock
             }),
-            radar: VecDeque::with_capacity(32),
-            imu: VecDeque::with_capacity(1024),
+            radar: VecDeque::with_capacity(128),
+            imu: VecDeque::with_capacity(4096),
             last_radar_t: None,
             last_imu_t: None,
             radar_period: cfg.radar_period_s,
@@ -339,7 +346,11 @@ impl Synchroniser {
             imu_missing: false,
             last_tick: f64::NEG_INFINITY,
             imu_done_t: None,
+            released_t: f64::NEG_INFINITY,
+            retimed: false,
+            last_imu_seen: None,
             offline_clock: false,
+            data_time: false,
             counters: SyncCounters::default(),
         }
     }
@@ -352,6 +363,35 @@ impl Synchroniser {
     /// IMU sample period in use \[s\].
     pub fn imu_period(&self) -> f64 {
         self.imu_period.unwrap_or(0.01)
+    }
+
+    fn radar_time(&self, item: &RadarItem) -> f64 {
+        let ready = match item.sensor_s {
+            Some(s) => self.radar_clock.host(s),
+            None => item.host_s - tx_s(item.bytes, self.cfg.radar_baud),
+        };
+        ready - item.processing_s - self.cfg.half_chirps_s
+    }
+
+    /// Times of what was held while the clocks settled, from the settled fits.
+    fn retime(&mut self) {
+        for k in 0..self.radar.len() {
+            let t = self.radar_time(&self.radar[k]);
+            self.radar[k].t = Some(t);
+        }
+        self.last_radar_t = self.radar.back().and_then(|r| r.t).or(self.last_radar_t);
+        for k in 0..self.imu.len() {
+            let t = self.imu_clock.host(self.imu[k].sensor_s);
+            self.imu[k].t = Some(t);
+        }
+        self.retimed = true;
+    }
+
+    /// True once every expected stream's clock is synchronised (always for offline times).
+    pub fn clocks_ready(&self) -> bool {
+        self.offline_clock
+            || ((!self.cfg.radar_enabled || self.radar_clock.synced())
+                && (!self.cfg.imu_enabled || self.imu_clock.synced()))
     }
 
     /// Current flags (radar/IMU missing, clock unsynced).
@@ -375,16 +415,21 @@ impl Synchroniser {
     /// Takes a radar frame; its box comes back out of [`Synchroniser::poll`] (or, when the
     /// buffer overflows, through `recycle`).
     pub fn push_radar(&mut self, mut item: Box<RadarItem>, recycle: impl FnOnce(Box<RadarItem>)) {
-        let tx = tx_s(item.bytes, self.cfg.radar_baud);
         let t = match (item.t, item.sensor_s) {
             (Some(t), _) => t,
-            (None, Some(s)) => {
-                self.radar_clock.push(s, item.host_s - tx);
-                self.radar_clock.host(s) - item.processing_s - self.cfg.half_chirps_s
+            (None, s) => {
+                if let Some(s) = s {
+                    let tx = tx_s(item.bytes, self.cfg.radar_baud);
+                    self.radar_clock.push(s, item.host_s - tx);
+                }
+                self.radar_time(&item)
             }
-            (None, None) => item.host_s - tx - item.processing_s - self.cfg.half_chirps_s,
         };
         item.t = Some(t);
+        tracing::trace!(frame = item.frame_number, t, sensor_s = ?item.sensor_s, host_s = item.host_s, "radar");
+        if !self.clocks_ready() {
+            self.counters.warmup += 1;
+        }
         if self.cfg.radar_period_s.is_none() {
             if let Some(prev) = self.last_radar_t {
                 let d = t - prev;
@@ -430,6 +475,11 @@ impl Synchroniser {
             }
         }
         item.t = Some(t);
+        self.last_imu_seen = Some(self.last_imu_seen.map_or(t, |l| l.max(t)));
+        tracing::trace!(t, sensor_s = item.sensor_s, host_s = item.host_s, "imu");
+        if !self.clocks_ready() {
+            self.counters.warmup += 1;
+        }
         self.last_imu_host = Some(item.host_s);
         if self.imu.len() == self.imu.capacity() {
             self.imu.pop_front();
@@ -440,12 +490,20 @@ impl Synchroniser {
 
     fn stalls(&mut self, now: f64) {
         let start = *self.start_host.get_or_insert(now);
+        // Sessions run on data time: the streams' own times on the common clock (host stamps of
+        // the two streams lead each other by the radar's processing and transfer time).
+        let (now, last_radar, last_imu) = if self.data_time {
+            (now, self.last_radar_t, self.last_imu_seen)
+        } else {
+            (now, self.last_radar_host, self.last_imu_host)
+        };
+        let start = if self.data_time { now.min(start) } else { start };
+        let margin = 0.05;
         let rm = self.cfg.radar_enabled
-            && now - self.last_radar_host.unwrap_or(start)
-                > self.cfg.stall_periods * self.radar_period() + 0.05;
+            && now - last_radar.unwrap_or(start)
+                > self.cfg.stall_periods * self.radar_period() + margin;
         let im = self.cfg.imu_enabled
-            && now - self.last_imu_host.unwrap_or(start)
-                > (self.cfg.stall_periods * self.imu_period()).max(0.05);
+            && now - last_imu.unwrap_or(start) > self.cfg.stall_periods * self.imu_period() + margin;
         if rm && !self.radar_missing {
             self.counters.radar_gaps += 1;
             tracing::warn!(now, "radar missing");
@@ -464,10 +522,23 @@ impl Synchroniser {
         self.imu_missing = im;
     }
 
-    /// Releases what can go at host time `now` \[s since the epoch\] (offline: the latest data
-    /// time), in order.
+    /// Releases what can go at host time `now` \[s since the epoch\] (sessions: the feeder's
+    /// watermark on the common clock), in order.
     pub fn poll(&mut self, now: f64, mut emit: impl FnMut(SyncOut)) {
+        // Sessions: `now` is the feeder's watermark on the common clock (everything up to it has
+        // been pushed), so a stream behind it by more than its stall time really has a gap.
+        if !now.is_finite() {
+            return;
+        }
         self.stalls(now);
+        if !self.clocks_ready() {
+            // Times from a clock fit of a few pairs are not good enough to start on: hold
+            // everything, then re-time it from the settled fits.
+            return;
+        }
+        if !self.retimed && !self.offline_clock {
+            self.retime();
+        }
         let health = self.health();
         loop {
             // Radar frames the IMU passed before they arrived (late), or that cannot wait.
@@ -481,6 +552,7 @@ impl Synchroniser {
                     if let Some(item) = self.radar.pop_front() {
                         self.counters.radar_late += u64::from(late);
                         self.counters.radar += 1;
+                        self.released_t = self.released_t.max(rt);
                         self.last_tick = now;
                         emit(SyncOut::Radar { item, health });
                         continue;
@@ -504,6 +576,7 @@ impl Synchroniser {
             }
             self.imu.pop_front();
             self.imu_done_t = Some(t);
+            self.released_t = self.released_t.max(t);
             self.counters.imu += 1;
             emit(SyncOut::Imu {
                 input: crate::estimator::ImuInput {
