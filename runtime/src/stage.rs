@@ -129,11 +129,9 @@ impl Stage {
                 read_ns,
                 health,
             } => {
-                tracing::trace!(t = input.t, a = input.accel[0], "ev imu");
                 self.on_imu(&input, read_ns, health, now_ns, &mut emit);
             }
             SyncOut::Radar { item, health } => {
-                tracing::trace!(t = ?item.t, frame = item.frame_number, n = item.points.len(), "ev radar");
                 self.on_radar(&item, health, now_ns, &mut emit);
                 recycle(item);
             }

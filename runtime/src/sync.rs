@@ -497,13 +497,18 @@ impl Synchroniser {
         } else {
             (now, self.last_radar_host, self.last_imu_host)
         };
-        let start = if self.data_time { now.min(start) } else { start };
+        let start = if self.data_time {
+            now.min(start)
+        } else {
+            start
+        };
         let margin = 0.05;
         let rm = self.cfg.radar_enabled
             && now - last_radar.unwrap_or(start)
                 > self.cfg.stall_periods * self.radar_period() + margin;
         let im = self.cfg.imu_enabled
-            && now - last_imu.unwrap_or(start) > self.cfg.stall_periods * self.imu_period() + margin;
+            && now - last_imu.unwrap_or(start)
+                > self.cfg.stall_periods * self.imu_period() + margin;
         if rm && !self.radar_missing {
             self.counters.radar_gaps += 1;
             tracing::warn!(now, "radar missing");
