@@ -12,8 +12,11 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+/// Points a recycled frame holds without growing (larger frames grow it once).
+pub const POINTS_RESERVED: usize = 512;
+
 /// A decoded radar frame on its way through the pipeline (boxes are recycled through a [`Pool`]).
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct RadarItem {
     /// Host time of the read that completed the frame \[s since the pipeline epoch\].
     pub host_s: f64,
@@ -31,6 +34,21 @@ pub struct RadarItem {
     pub t: Option<f64>,
     /// Points.
     pub points: Vec<Point>,
+}
+
+impl Default for RadarItem {
+    fn default() -> Self {
+        RadarItem {
+            host_s: 0.0,
+            read_ns: 0,
+            sensor_s: None,
+            frame_number: 0,
+            bytes: 0,
+            processing_s: 0.0,
+            t: None,
+            points: Vec::with_capacity(POINTS_RESERVED),
+        }
+    }
 }
 
 /// A decoded IMU sample.
