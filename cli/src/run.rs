@@ -109,13 +109,15 @@ pub fn run(a: RunArgs) -> Result<()> {
         Some(p) => FileConfig::load(p)?,
         None => FileConfig::default(),
     };
-    let mut cfg = RunConfig::default();
-    cfg.estimator = match a.estimator {
-        Some(EstimatorArg::Model) => EstimatorKind::Model,
-        Some(EstimatorArg::Doppler) => EstimatorKind::Doppler,
-        Some(EstimatorArg::Imu) => EstimatorKind::Imu,
-        Some(EstimatorArg::Auto) => EstimatorKind::Auto,
-        None => file.estimator.unwrap_or(EstimatorKind::Auto),
+    let mut cfg = RunConfig {
+        estimator: match a.estimator {
+            Some(EstimatorArg::Model) => EstimatorKind::Model,
+            Some(EstimatorArg::Doppler) => EstimatorKind::Doppler,
+            Some(EstimatorArg::Imu) => EstimatorKind::Imu,
+            Some(EstimatorArg::Auto) => EstimatorKind::Auto,
+            None => file.estimator.unwrap_or(EstimatorKind::Auto),
+        },
+        ..RunConfig::default()
     };
     cfg.model = a.model.clone().or(file.model.clone());
     cfg.outputs = if a.out.is_empty() {

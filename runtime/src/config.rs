@@ -169,7 +169,7 @@ impl FileConfig {
         ] {
             if let Some(p) = p {
                 let n = p.rotation_wxyz.iter().map(|v| v * v).sum::<f64>().sqrt();
-                if !((n - 1.0).abs() < 1e-3) {
+                if (n - 1.0).abs().is_nan() || (n - 1.0).abs() >= 1e-3 {
                     return Err(format!(
                         "{name}.rotation_wxyz: not a unit quaternion (norm {n})"
                     ));

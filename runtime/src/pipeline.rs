@@ -703,7 +703,6 @@ fn feed_session(
         it.t = (!online_clock).then_some(tr);
         it.points.clear();
         it.points.extend_from_slice(&f.cloud.points);
-        let mut it = it;
         while let Err(back) = sh.radar_q.try_push(it) {
             it = back;
             std::thread::sleep(Duration::from_micros(50));
