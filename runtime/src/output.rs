@@ -155,3 +155,73 @@ impl Encoded {
         self.serial_len = encode_serial(m, &mut self.serial).unwrap_or(0);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pose_link::{Deframer, Event};
+    use std::sync::{Arc, Mutex};
+
+    #[derive(Clone, Default)]
+    struct Shared(Arc<Mutex<Vec<u8>>>);
+    impl Write for Shared {
+        fn write(&mut self, b: &[u8]) -> io::Result<usize> {
+            self.0.lock().unwrap().extend_from_slice(b);
+            Ok(b.len())
+        }
+        fn flush(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn output_specs_parse() {
+        assert_eq!(
+            "udp://127.0.0.1:9870".parse(),
+            Ok(OutputSpec::Udp("127.0.0.1:9870".into()))
+        );
+        assert_eq!(
+            "serial:/dev/ttyUSB2@460800".parse(),
+            Ok(OutputSpec::Serial("/dev/ttyUSB2".into(), 460_800))
+        );
+        assert_eq!(
+            "serial:/dev/ttyUSB2".parse(),
+            Ok(OutputSpec::Serial("/dev/ttyUSB2".into(), 921_600))
+        );
+        assert_eq!("tum:a.tum".parse(), Ok(OutputSpec::Tum("a.tum".into())));
+        assert!("udp://host".parse::<OutputSpec>().is_err());
+        assert!("file:x".parse::<OutputSpec>().is_err());
+    }
+
+    #[test]
+    fn serial_frames_decode_with_the_pose_link_deframer() {
+        let buf = Shared::default();
+        let mut sink = Sink::Writer(Box::new(buf.clone()));
+        let mut enc = Encoded::default();
+        let msgs: Vec<PoseMessage> = (0..3u32)
+            .map(|k| PoseMessage {
+                seq: k,
+                position: [f64::from(k), 0.0, 0.0],
+                health: Health::PREDICTED,
+                ..PoseMessage::default()
+            })
+            .collect();
+        for m in &msgs {
+            enc.encode(m);
+            sink.send(m, 0.0, &enc.bytes, &enc.serial[..enc.serial_len])
+                .unwrap();
+        }
+        let bytes = buf.0.lock().unwrap().clone();
+        let mut d: Deframer<256> = Deframer::default();
+        let mut input = &bytes[..];
+        let mut got = Vec::new();
+        loop {
+            match d.poll(&mut input) {
+                Event::Message(m) => got.push(m),
+                Event::NeedMore => break,
+                other => panic!("{other:?}"),
+            }
+        }
+        assert_eq!(got, msgs);
+    }
+}
