@@ -314,6 +314,8 @@ pub struct Synchroniser {
     imu_done_t: Option<f64>,
     released_t: f64,
     retimed: bool,
+    last_virtual: f64,
+    virtual_frame: u32,
     last_imu_seen: Option<f64>,
     /// Set when items carry precomputed times from an offline clock fit.
     pub offline_clock: bool,
@@ -348,6 +350,8 @@ impl Synchroniser {
             imu_done_t: None,
             released_t: f64::NEG_INFINITY,
             retimed: false,
+            last_virtual: f64::NEG_INFINITY,
+            virtual_frame: 0,
             last_imu_seen: None,
             offline_clock: false,
             data_time: false,
@@ -592,6 +596,21 @@ impl Synchroniser {
                 read_ns: s.read_ns,
                 health,
             });
+            // Without a radar stream, empty frames at the radar period give the estimator its
+            // radar-rate poses (IMU dead reckoning).
+            if !self.cfg.radar_enabled && t - self.last_virtual >= self.radar_period() {
+                self.last_virtual = t;
+                self.virtual_frame = self.virtual_frame.wrapping_add(1);
+                let item = Box::new(RadarItem {
+                    host_s: s.host_s,
+                    read_ns: s.read_ns,
+                    frame_number: self.virtual_frame,
+                    t: Some(t),
+                    ..RadarItem::default()
+                });
+                self.counters.radar += 1;
+                emit(SyncOut::Radar { item, health });
+            }
             // Radar frames due at or before this sample go right after it (not counted late).
             while self.radar.front().is_some_and(|r| r.t.unwrap_or(0.0) <= t) {
                 if let Some(item) = self.radar.pop_front() {
