@@ -471,6 +471,8 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
                 sync.flush(emit);
                 break;
             }
+            sh2.sync_dropped
+                .store(sync.counters.dropped, Ordering::Relaxed);
             if !any {
                 std::thread::sleep(Duration::from_micros(200));
             }
