@@ -235,6 +235,37 @@ fn replayed_session_streams_a_pose_per_radar_frame_as_good_as_offline() {
         o.msgs.iter().any(|m| m.health.contains(Health::PREDICTED)),
         "IMU-rate output is on"
     );
+    // Predicted poses: the IMU propagation from one radar-rate pose lands near the next one.
+    let predicted: Vec<&PoseMessage> = o
+        .msgs
+        .iter()
+        .filter(|m| m.health.contains(Health::PREDICTED))
+        .collect();
+    let mut errs: Vec<f64> = radar_rate
+        .iter()
+        .filter_map(|r| {
+            let p = predicted
+                .iter()
+                .min_by_key(|p| p.sensor_time_ns.abs_diff(r.sensor_time_ns))?;
+            (p.sensor_time_ns.abs_diff(r.sensor_time_ns) < 3_000_000).then(|| {
+                (0..3)
+                    .map(|i| (p.position[i] - r.position[i]).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            })
+        })
+        .collect();
+    errs.sort_by(f64::total_cmp);
+    assert!(errs.len() > 100);
+    let median = errs[errs.len() / 2];
+    println!(
+        "prediction vs next radar-rate pose: median {median:.4} m, max {:.4} m",
+        errs[errs.len() - 1]
+    );
+    assert!(
+        median < 0.03,
+        "IMU-rate prediction off by {median} m (median)"
+    );
     let ate_on = ate(&s, &on_session_clock(&s, &o));
     let lat = &o.summary["latency"];
     println!(

@@ -409,7 +409,10 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
     }
 
     // Synchroniser.
-    let sync_cfg = cfg.sync;
+    let sync_cfg = SyncConfig {
+        preview_imu: cfg.imu_rate_output,
+        ..cfg.sync
+    };
     let session_online_clock = cfg.session_online_clock;
     let sh2 = Arc::clone(&sh);
     let sync_thread = std::thread::Builder::new().name("sync".into()).spawn(move || {
@@ -441,6 +444,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
             let emit = |ev: SyncOut| {
                 let read_ns = match &ev {
                     SyncOut::Imu { read_ns, .. } => Some(*read_ns),
+                    SyncOut::Preview { .. } => None,
                     SyncOut::Radar { item, .. } => Some(item.read_ns),
                     SyncOut::Tick { .. } => None,
                 };

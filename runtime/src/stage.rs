@@ -10,6 +10,10 @@ use milliego_odometry::strapdown::{ImuSample, NavState, Strapdown, STANDARD_GRAV
 use nalgebra::{Isometry3, Vector3};
 use pose_link::{Estimator as Code, Health, PoseMessage};
 
+/// IMU samples kept to re-integrate the prediction from a radar-rate pose that arrives after
+/// later samples were previewed.
+const RECENT: usize = 256;
+
 /// A pose on its way to the outputs.
 #[derive(Debug, Clone, Copy)]
 pub struct PoseOut {
@@ -61,6 +65,10 @@ pub struct Stage {
     last_imu: Option<ImuSample>,
     last_radar_rate_t: f64,
     pending_reset: bool,
+    previews: bool,
+    recent: [ImuSample; RECENT],
+    recent_head: usize,
+    recent_len: usize,
     /// Counters.
     pub counters: StageCounters,
 }
@@ -87,6 +95,14 @@ impl Stage {
             last_imu: None,
             last_radar_rate_t: f64::NEG_INFINITY,
             pending_reset: false,
+            previews: false,
+            recent: [ImuSample {
+                t: 0.0,
+                accel: [0.0; 3],
+                gyro: [0.0; 3],
+            }; RECENT],
+            recent_head: 0,
+            recent_len: 0,
             counters: StageCounters::default(),
         }
     }
@@ -131,6 +147,11 @@ impl Stage {
             } => {
                 self.on_imu(&input, read_ns, health, now_ns, &mut emit);
             }
+            SyncOut::Preview {
+                input,
+                read_ns,
+                health,
+            } => self.on_preview(&input, read_ns, health, now_ns, &mut emit),
             SyncOut::Radar { item, health } => {
                 self.on_radar(&item, health, now_ns, &mut emit);
                 recycle(item);
@@ -175,6 +196,10 @@ impl Stage {
             gyro: s.gyro,
         };
         self.last_imu = Some(sample);
+        if self.previews {
+            // The previews already propagated and published this sample.
+            return;
+        }
         let Some(sd) = self.predict.as_mut() else {
             return;
         };
@@ -190,6 +215,48 @@ impl Stage {
         if radar_missing {
             self.last_radar_rate_t = s.t;
         }
+        if let Some(p) = self.predicted_pose() {
+            let msg = self.message(
+                &p,
+                None,
+                Health(self.flags(health).0 | Health::PREDICTED.0),
+                s.t,
+                radar_missing,
+            );
+            self.counters.predicted_poses += 1;
+            emit(PoseOut {
+                msg,
+                t: s.t,
+                read_ns,
+                emitted_ns: now_ns,
+            });
+        }
+    }
+
+    /// An IMU sample as it arrived (before the estimator sees it in order): propagate the
+    /// prediction and publish it at once.
+    fn on_preview(
+        &mut self,
+        s: &ImuInput,
+        read_ns: u64,
+        health: Health,
+        now_ns: u64,
+        emit: &mut impl FnMut(PoseOut),
+    ) {
+        self.previews = true;
+        let sample = ImuSample {
+            t: s.t,
+            accel: s.accel,
+            gyro: s.gyro,
+        };
+        self.recent[self.recent_head] = sample;
+        self.recent_head = (self.recent_head + 1) % RECENT;
+        self.recent_len = (self.recent_len + 1).min(RECENT);
+        let Some(sd) = self.predict.as_mut() else {
+            return;
+        };
+        sd.push(sample);
+        let radar_missing = health.contains(Health::RADAR_MISSING);
         if let Some(p) = self.predicted_pose() {
             let msg = self.message(
                 &p,
@@ -277,7 +344,23 @@ impl Stage {
             v: r.velocity_world.unwrap_or_else(Vector3::zeros),
         };
         let mut sd = Strapdown::new(nav, STANDARD_GRAVITY);
-        if let Some(last) = self.last_imu {
+        if self.previews {
+            // Samples already previewed past this frame: integrate them again from the new pose.
+            let mut first = true;
+            for k in 0..self.recent_len {
+                let x = self.recent[(self.recent_head + RECENT - self.recent_len + k) % RECENT];
+                if x.t < r.t_to {
+                    continue;
+                }
+                if first {
+                    sd.push(ImuSample { t: r.t_to, ..x });
+                    first = false;
+                }
+                if x.t > r.t_to {
+                    sd.push(x);
+                }
+            }
+        } else if let Some(last) = self.last_imu {
             sd.push(ImuSample {
                 t: r.t_to.max(last.t),
                 ..last

@@ -222,6 +222,16 @@ pub enum SyncOut {
         /// Sensor and clock flags.
         health: Health,
     },
+    /// An IMU sample as soon as it arrives, before it is put in order (IMU-rate prediction
+    /// only; the same sample comes again as [`SyncOut::Imu`] for the estimator).
+    Preview {
+        /// Sample.
+        input: crate::estimator::ImuInput,
+        /// Host read time of the sample \[ns since the epoch\].
+        read_ns: u64,
+        /// Sensor and clock flags.
+        health: Health,
+    },
     /// Radar is missing: a pose is due anyway (once per radar period).
     Tick {
         /// Time on the common clock \[s\].
@@ -252,6 +262,8 @@ pub struct SyncConfig {
     pub imu_enabled: bool,
     /// Clock fits.
     pub clock: ClockConfig,
+    /// Emit every IMU sample at once as [`SyncOut::Preview`] (IMU-rate output).
+    pub preview_imu: bool,
 }
 
 impl Default for SyncConfig {
@@ -266,6 +278,7 @@ impl Default for SyncConfig {
             radar_enabled: true,
             imu_enabled: true,
             clock: ClockConfig::default(),
+            preview_imu: false,
         }
     }
 }
@@ -316,6 +329,7 @@ pub struct Synchroniser {
     retimed: bool,
     last_virtual: f64,
     virtual_frame: u32,
+    unpreviewed: usize,
     last_imu_seen: Option<f64>,
     /// Set when items carry precomputed times from an offline clock fit.
     pub offline_clock: bool,
@@ -352,6 +366,7 @@ impl Synchroniser {
             retimed: false,
             last_virtual: f64::NEG_INFINITY,
             virtual_frame: 0,
+            unpreviewed: 0,
             last_imu_seen: None,
             offline_clock: false,
             data_time: false,
@@ -490,6 +505,7 @@ impl Synchroniser {
             self.counters.dropped += 1;
         }
         self.imu.push_back(item);
+        self.unpreviewed = (self.unpreviewed + 1).min(self.imu.len());
     }
 
     fn stalls(&mut self, now: f64) {
@@ -549,6 +565,22 @@ impl Synchroniser {
             self.retime();
         }
         let health = self.health();
+        if self.cfg.preview_imu {
+            let n = self.imu.len();
+            for k in n - self.unpreviewed.min(n)..n {
+                let s = self.imu[k];
+                emit(SyncOut::Preview {
+                    input: crate::estimator::ImuInput {
+                        t: s.t.unwrap_or(0.0),
+                        accel: s.accel,
+                        gyro: s.gyro,
+                    },
+                    read_ns: s.read_ns,
+                    health,
+                });
+            }
+        }
+        self.unpreviewed = 0;
         loop {
             // Radar frames the IMU passed before they arrived (late), or that cannot wait.
             if let Some(r) = self.radar.front() {

@@ -82,6 +82,7 @@ fn steady_state_allocates_nothing() {
         half_chirps_s: d.active_frame_time_ms / 2e3,
         radar_baud: s.meta.radar.as_ref().unwrap().baud,
         imu_baud: s.meta.imu.as_ref().unwrap().baud,
+        preview_imu: true,
         ..SyncConfig::default()
     });
     let built = build_run_estimators(EstimatorKind::Doppler, &classical, None).unwrap();
