@@ -19,6 +19,7 @@ mod pose;
 mod radar;
 mod record;
 mod replay;
+mod run;
 mod score;
 mod selftest;
 mod sim;
@@ -66,6 +67,9 @@ enum Command {
     Sim(sim::SimArgs),
     /// Replay a session into pseudo-terminals or serial devices (the HIL rig).
     Replay(replay::ReplayArgs),
+    /// The runtime: live ports (or a replay's ptys) or a session -> estimator -> poses over
+    /// UDP, serial, TUM.
+    Run(run::RunArgs),
     /// Record the radar and IMU ports into a session.
     Record(record::RecordArgs),
     /// A session and estimated trajectories as MCAP with ROS 2 schemas (Foxglove, ros2 bag).
@@ -77,6 +81,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Demo(a) => demo::run(a),
         Command::Dataset(cmd) => dataset::run(cmd),
+        Command::Run(a) => run::run(a),
         Command::Radar(cmd) => radar::run(cmd),
         Command::Imu(cmd) => imu::run(cmd),
         Command::Pose(cmd) => pose::run(cmd),

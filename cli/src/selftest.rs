@@ -331,7 +331,10 @@ fn model_checks(dir: &std::path::Path, checks: &mut Map<String, Value>) -> Resul
         .take_while(|k| st.tensor(&format!("radar_{k}")).is_ok())
         .count();
     let mut all_ok = true;
-    for (file, key, tol) in [("model.onnx", "fp32", 1e-4f64), ("model-int8.onnx", "int8", 2e-2)] {
+    for (file, key, tol) in [
+        ("model.onnx", "fp32", 1e-4f64),
+        ("model-int8.onnx", "int8", 2e-2),
+    ] {
         let mut m = milliego_models::Model::load(&dir.join(file), None)?;
         let h = m.meta().hidden;
         let mut outputs = Vec::new();

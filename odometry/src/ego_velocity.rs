@@ -158,6 +158,8 @@ pub struct EgoVelocityEstimator {
     dirs: Vec<Vector3<f64>>,
     vr: Vec<f64>,
     idx: Vec<usize>,
+    inl: Vec<usize>,
+    inlier_dirs: Vec<Vector3<f64>>,
 }
 
 impl EgoVelocityEstimator {
@@ -168,6 +170,8 @@ impl EgoVelocityEstimator {
             dirs: Vec::new(),
             vr: Vec::new(),
             idx: Vec::new(),
+            inl: Vec::new(),
+            inlier_dirs: Vec::new(),
         }
     }
 
@@ -188,6 +192,29 @@ impl EgoVelocityEstimator {
     /// returned velocity and covariance come from the radar points alone, so a filter can fuse
     /// them without counting its own prediction twice.
     pub fn estimate_guided(&mut self, detections: &[Detection], prior: Option<Prior>) -> Estimate {
+        let mut est = Estimate {
+            velocity: [0.0; 3],
+            covariance: [[0.0; 3]; 3],
+            status: Status::Ok,
+            inliers: 0,
+            usable: 0,
+            skipped: 0,
+            residual_rms: 0.0,
+            inlier_mask: Vec::new(),
+            iterations: 0,
+        };
+        self.estimate_guided_into(detections, prior, &mut est);
+        est
+    }
+
+    /// [`EgoVelocityEstimator::estimate_guided`] into an existing estimate, reusing its inlier
+    /// mask: once the buffers have grown to a frame's size, estimating allocates nothing.
+    pub fn estimate_guided_into(
+        &mut self,
+        detections: &[Detection],
+        prior: Option<Prior>,
+        out: &mut Estimate,
+    ) {
         let cfg = self.cfg;
         self.dirs.clear();
         self.vr.clear();
@@ -211,7 +238,10 @@ impl EgoVelocityEstimator {
             self.idx.push(i);
         }
         let usable = self.dirs.len();
-        let mut est = Estimate {
+        let mut mask = core::mem::take(&mut out.inlier_mask);
+        mask.clear();
+        mask.resize(detections.len(), false);
+        *out = Estimate {
             velocity: [0.0; 3],
             covariance: [[0.0; 3]; 3],
             status: Status::Ok,
@@ -219,9 +249,10 @@ impl EgoVelocityEstimator {
             usable,
             skipped: detections.len() - usable,
             residual_rms: 0.0,
-            inlier_mask: vec![false; detections.len()],
+            inlier_mask: mask,
             iterations: 0,
         };
+        let est = out;
         let dof = match cfg.model {
             Model::Full3d => 3,
             Model::Planar => 2,
@@ -229,7 +260,7 @@ impl EgoVelocityEstimator {
         let need = dof.max(cfg.min_inliers);
         if usable < need {
             est.status = Status::TooFewPoints { usable, need };
-            return est;
+            return;
         }
         if let Some((dir, spread)) = weakest_direction(&self.dirs, cfg.model) {
             if spread < f64::from(cfg.min_spread) {
@@ -237,7 +268,7 @@ impl EgoVelocityEstimator {
                     weak_direction: [dir.x as f32, dir.y as f32, dir.z as f32],
                     spread: spread as f32,
                 };
-                return est;
+                return;
             }
         }
 
@@ -322,23 +353,23 @@ impl EgoVelocityEstimator {
                 best_inliers: 0,
                 need: need_inliers,
             };
-            return est;
+            return;
         };
         if count < need_inliers {
             est.status = Status::NoConsensus {
                 best_inliers: count,
                 need: need_inliers,
             };
-            return est;
+            return;
         }
         // Least squares on the consensus set, then once more on the refined set.
         let mut v = v0;
-        let mut inl: Vec<usize> = Vec::new();
+        let mut inl = core::mem::take(&mut self.inl);
+        inl.clear();
         for _ in 0..2 {
             let th = thresh_for(&v);
-            inl = (0..usable)
-                .filter(|&i| (self.vr[i] + self.dirs[i].dot(&v)).abs() <= th)
-                .collect();
+            inl.clear();
+            inl.extend((0..usable).filter(|&i| (self.vr[i] + self.dirs[i].dot(&v)).abs() <= th));
             if inl.len() < dof {
                 break;
             }
@@ -351,17 +382,23 @@ impl EgoVelocityEstimator {
                 best_inliers: inl.len(),
                 need: need_inliers,
             };
-            return est;
+            self.inl = inl;
+            return;
         }
-        let inlier_dirs: Vec<Vector3<f64>> = inl.iter().map(|&i| self.dirs[i]).collect();
-        if let Some((dir, spread)) = weakest_direction(&inlier_dirs, cfg.model) {
+        let mut inlier_dirs = core::mem::take(&mut self.inlier_dirs);
+        inlier_dirs.clear();
+        inlier_dirs.extend(inl.iter().map(|&i| self.dirs[i]));
+        let weak = weakest_direction(&inlier_dirs, cfg.model);
+        self.inlier_dirs = inlier_dirs;
+        if let Some((dir, spread)) = weak {
             if spread < f64::from(cfg.min_spread) {
                 est.status = Status::Degenerate {
                     weak_direction: [dir.x as f32, dir.y as f32, dir.z as f32],
                     spread: spread as f32,
                 };
                 est.inliers = inl.len();
-                return est;
+                self.inl = inl;
+                return;
             }
         }
         let ss: f64 = inl
@@ -400,7 +437,7 @@ impl EgoVelocityEstimator {
         for &i in &inl {
             est.inlier_mask[self.idx[i]] = true;
         }
-        est
+        self.inl = inl;
     }
 }
 

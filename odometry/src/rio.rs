@@ -212,14 +212,9 @@ impl Rio {
         let dt = self.nav.state().t - before.t;
         self.propagate_cov(&before, &s, dt);
         let now = self.nav.state().t;
-        let due: Vec<VelocityMeasurement> = self
-            .pending
-            .iter()
-            .filter(|m| m.t <= now)
-            .copied()
-            .collect();
-        self.pending.retain(|m| m.t > now);
-        for m in due {
+        // In queue order, without a temporary vector (the runtime's hot path allocates nothing).
+        while let Some(i) = self.pending.iter().position(|m| m.t <= now) {
+            let m = self.pending.remove(i);
             self.update(&m);
         }
     }

@@ -209,6 +209,28 @@ fn deterministic_for_a_seed() {
 }
 
 #[test]
+fn estimating_into_a_reused_estimate_gives_the_same_results() {
+    // One estimator and one estimate reused over frames of every outcome (ok, too few points,
+    // no consensus, sizes up and down) against a fresh estimator per frame.
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let mut reused = EgoVelocityEstimator::new(cfg());
+    let mut est = reused.estimate(&[]);
+    for (n, outliers) in [
+        (80, 0.5),
+        (3, 0.0),
+        (120, 0.7),
+        (40, 0.95),
+        (60, 0.2),
+        (10, 0.0),
+    ] {
+        let (dets, _) = frame(&mut rng, [0.4, -0.3, 0.05], n, outliers, 20.0);
+        reused.estimate_guided_into(&dets, None, &mut est);
+        let fresh = EgoVelocityEstimator::new(cfg()).estimate(&dets);
+        assert_eq!(est, fresh, "{n} points, {outliers} outliers");
+    }
+}
+
+#[test]
 fn a_prior_picks_the_static_world_over_a_larger_coherent_ghost_set() {
     // 12 static points moving with v, 25 ghosts coherent with a mirrored velocity: unguided RANSAC
     // takes the ghosts, the filter's prior picks the world.

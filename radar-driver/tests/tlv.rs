@@ -376,3 +376,40 @@ fn pc52_header_fields() {
     assert_eq!(h.lab_timing.unwrap().uart_sending, 4);
     assert_eq!(f.padding_len(), 0);
 }
+
+#[cfg(feature = "std")]
+#[test]
+fn decode_into_a_reused_cloud_equals_from_frame() {
+    use radar_driver::host::PointCloud;
+    // Frames with and without side info, stats and points, in sizes up and down.
+    let p3 = [
+        [1.0, 2.0, 0.5, -1.5],
+        [0.0, 3.0, 0.0, 0.2],
+        [-1.0, 1.0, 0.1, 0.0],
+    ];
+    let p1 = [[0.5, 4.0, -0.2, 1.0]];
+    let frames = [
+        FrameBuilder::oob(0x0303_0002, 0xA6843, 1)
+            .points(&p3)
+            .tlv(TlvOut::SideInfo(&[(123, 45), (99, 10), (5, 1)]))
+            .tlv(TlvOut::Stats([1, 2, 3, 4, 5, 6]))
+            .to_vec(),
+        FrameBuilder::oob(0x0303_0002, 0xA6843, 2)
+            .points(&p1)
+            .to_vec(),
+        FrameBuilder::oob(0x0303_0002, 0xA6843, 3)
+            .points(&[])
+            .tlv(TlvOut::SideInfo(&[]))
+            .to_vec(),
+        FrameBuilder::oob(0x0303_0002, 0xA6843, 4)
+            .points(&p3)
+            .tlv(TlvOut::SideInfo(&[(1, 2), (3, 4), (5, 6)]))
+            .to_vec(),
+    ];
+    let mut reused = PointCloud::default();
+    for (k, bytes) in frames.iter().enumerate() {
+        let f = radar_driver::Frame::new_checked(bytes, Layout::Oob40).unwrap();
+        reused.decode_into(&f, Some(0.1));
+        assert_eq!(reused, PointCloud::from_frame(&f, Some(0.1)), "frame {k}");
+    }
+}

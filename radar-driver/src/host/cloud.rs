@@ -34,11 +34,34 @@ impl PointCloud {
     /// Decodes `frame`. `velocity_resolution_mps` scales SDK 1/2 Doppler indices (from
     /// [`crate::cfg::Derived::velocity_resolution_mps`]).
     pub fn from_frame(frame: &Frame<'_>, velocity_resolution_mps: Option<f32>) -> PointCloud {
+        let mut c = PointCloud::default();
+        c.decode_into(frame, velocity_resolution_mps);
+        c
+    }
+
+    /// Decodes `frame` into `self`, reusing its buffers: the vectors are cleared and refilled, so
+    /// once they have grown to a frame's size decoding allocates nothing (the SNR and noise
+    /// vectors are reused while consecutive frames carry side info). Same result as
+    /// [`PointCloud::from_frame`].
+    pub fn decode_into(&mut self, frame: &Frame<'_>, velocity_resolution_mps: Option<f32>) {
         let dialect = Dialect::of(frame);
-        let mut c = PointCloud {
-            velocity_known: true,
-            ..PointCloud::default()
-        };
+        let c = self;
+        let mut snr = c.snr_db.take();
+        let mut noise = c.noise_db.take();
+        let mut snr_set = false;
+        let mut noise_set = false;
+        c.points.clear();
+        c.velocity_known = true;
+        c.targets.clear();
+        c.stats = None;
+        c.tlv_types.clear();
+        c.empty_points_tlv = false;
+        c.tlv_errors.clear();
+        fn refill(v: &mut Option<Vec<f32>>, it: impl Iterator<Item = f32>) {
+            let b = v.get_or_insert_with(Vec::new);
+            b.clear();
+            b.extend(it);
+        }
         for raw in frame.tlvs() {
             c.tlv_types.push(raw.ty);
             match raw.decode(dialect) {
@@ -60,11 +83,14 @@ impl PointCloud {
                 Ok(Tlv::CompressedPoints(p)) => {
                     c.empty_points_tlv |= p.is_empty();
                     c.points.extend(p.iter().map(|s| s.to_cartesian()));
-                    c.snr_db = Some(p.iter().map(|s| s.snr).collect());
+                    refill(&mut snr, p.iter().map(|s| s.snr));
+                    snr_set = true;
                 }
                 Ok(Tlv::SideInfo(s)) => {
-                    c.snr_db = Some(s.iter().map(|e| e.snr_db()).collect());
-                    c.noise_db = Some(s.iter().map(|e| e.noise_db()).collect());
+                    refill(&mut snr, s.iter().map(|e| e.snr_db()));
+                    refill(&mut noise, s.iter().map(|e| e.noise_db()));
+                    snr_set = true;
+                    noise_set = true;
                 }
                 Ok(Tlv::Targets(t)) => c.targets.extend(t.iter()),
                 Ok(Tlv::Stats(st)) => c.stats = Some(st),
@@ -72,6 +98,7 @@ impl PointCloud {
                 Err(e) => c.tlv_errors.push(e),
             }
         }
-        c
+        c.snr_db = if snr_set { snr } else { None };
+        c.noise_db = if noise_set { noise } else { None };
     }
 }

@@ -1,0 +1,217 @@
+//! `milliego run`: the online runtime (live ports or a replay's pseudo-terminals) or an offline run
+//! over a session, streaming poses to UDP, serial and TUM outputs. See docs/runtime.md.
+
+use clap::{Args, ValueEnum};
+use milliego_runtime::config::FileConfig;
+use milliego_runtime::estimator::EstimatorKind;
+use milliego_runtime::output::OutputSpec;
+use milliego_runtime::pipeline::{run as run_pipeline, Devices, Input, RunConfig};
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum EstimatorArg {
+    /// The learned milliEgo model.
+    Model,
+    /// Doppler radar-inertial odometry.
+    Doppler,
+    /// IMU dead reckoning.
+    Imu,
+    /// The model when available, else Doppler (flagged model_fallback).
+    Auto,
+}
+
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// Offline: a session directory (as fast as possible; --realtime for its original pace).
+    #[arg(long, conflicts_with_all = ["radar_data", "imu"])]
+    session: Option<PathBuf>,
+    /// Offline: keep the session's original pacing.
+    #[arg(long, requires = "session")]
+    realtime: bool,
+    /// Radar CLI port (the .cfg is uploaded there unless --no-configure).
+    #[arg(long)]
+    radar_cli: Option<String>,
+    /// Radar data port.
+    #[arg(long)]
+    radar_data: Option<String>,
+    /// Radar .cfg (uploaded; also gives the velocity resolution and frame period).
+    #[arg(long)]
+    radar_cfg: Option<PathBuf>,
+    /// Radar data-port baud rate.
+    #[arg(long)]
+    radar_baud: Option<u32>,
+    /// IMU port.
+    #[arg(long)]
+    imu: Option<String>,
+    /// IMU baud rate.
+    #[arg(long)]
+    imu_baud: Option<u32>,
+    /// Do not configure the sensors (replayed ports, or sensors already streaming).
+    #[arg(long)]
+    no_configure: bool,
+    /// Estimator.
+    #[arg(long, value_enum)]
+    estimator: Option<EstimatorArg>,
+    /// Learned-model file.
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Output: udp://HOST:PORT, serial:DEV or serial:DEV@BAUD, tum:FILE (repeatable).
+    #[arg(long = "out")]
+    out: Vec<String>,
+    /// Configuration file (TOML); flags override it.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// IMU-rate predicted poses between radar-rate poses: on or off (default: on for live
+    /// ports, off for sessions).
+    #[arg(long)]
+    imu_rate_output: Option<bool>,
+    /// TUM outputs also get the predicted poses.
+    #[arg(long)]
+    tum_predicted: bool,
+    /// Write the summary as JSON to this file.
+    #[arg(long)]
+    summary_json: Option<PathBuf>,
+    /// Stop after this many seconds.
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Stop when no sensor byte arrived for this many seconds (once data has flowed).
+    #[arg(long)]
+    idle_exit: Option<f64>,
+    /// Sessions: align the clocks with the online synchroniser instead of the whole-session fit.
+    #[arg(long, requires = "session")]
+    online_clock: bool,
+    /// More logging (-v info, -vv debug); RUST_LOG overrides.
+    #[arg(short, long, action = clap::ArgAction::Count)]
+    verbose: u8,
+}
+
+fn init_logging(verbose: u8) {
+    use tracing_subscriber::EnvFilter;
+    let default = match verbose {
+        0 => "warn",
+        1 => "info",
+        _ => "debug",
+    };
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default));
+    use std::io::IsTerminal;
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_ansi(std::io::stderr().is_terminal())
+        .with_writer(std::io::stderr)
+        .try_init();
+}
+
+pub fn run(a: RunArgs) -> Result<()> {
+    init_logging(a.verbose);
+    let file = match &a.config {
+        Some(p) => FileConfig::load(p)?,
+        None => FileConfig::default(),
+    };
+    let mut cfg = RunConfig {
+        estimator: match a.estimator {
+            Some(EstimatorArg::Model) => EstimatorKind::Model,
+            Some(EstimatorArg::Doppler) => EstimatorKind::Doppler,
+            Some(EstimatorArg::Imu) => EstimatorKind::Imu,
+            Some(EstimatorArg::Auto) => EstimatorKind::Auto,
+            None => file.estimator.unwrap_or(EstimatorKind::Auto),
+        },
+        ..RunConfig::default()
+    };
+    // Default: the shipped int8 model, when run from the repository.
+    cfg.model = a.model.clone().or(file.model.clone()).or_else(|| {
+        let p = PathBuf::from("models/compact/model-int8.onnx");
+        p.is_file().then_some(p)
+    });
+    cfg.outputs = if a.out.is_empty() {
+        file.outputs()?
+    } else {
+        a.out
+            .iter()
+            .map(|o| o.parse::<OutputSpec>())
+            .collect::<std::result::Result<_, _>>()?
+    };
+    let radar_data = a.radar_data.clone().or(file.radar.data.clone());
+    let imu = a.imu.clone().or(file.imu.port.clone());
+    let offline = a.session.is_some();
+    if !offline && radar_data.is_none() && imu.is_none() {
+        return Err(
+            "give --session DIR, or --radar-data and/or --imu (or a --config naming them)".into(),
+        );
+    }
+    cfg.imu_rate_output = a
+        .imu_rate_output
+        .or(file.imu_rate_output)
+        .unwrap_or(!offline);
+    cfg.tum_predicted = a.tum_predicted || file.tum_predicted.unwrap_or(false);
+    cfg.duration_s = a.duration;
+    cfg.session_online_clock = a.online_clock;
+    cfg.idle_exit_s = a.idle_exit;
+    if let Some(s) = file.sync.stall_periods {
+        cfg.sync.stall_periods = s;
+    }
+    if let Some(s) = file.sync.max_hold_s {
+        cfg.sync.max_hold_s = s;
+    }
+    if let Some(w) = file.sync.clock_window {
+        cfg.sync.clock.window = w;
+    }
+    if let Some(l) = file.sync.late_s {
+        cfg.sync.clock.late_s = l;
+    }
+    let q = &file.queues;
+    for (slot, v) in cfg
+        .queues
+        .iter_mut()
+        .zip([q.radar, q.imu, q.events, q.poses])
+    {
+        if let Some(v) = v {
+            *slot = v;
+        }
+    }
+    let place = |p: &milliego_runtime::config::Placement| {
+        let [w, x, y, z] = p.rotation_wxyz;
+        nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::from(nalgebra::Vector3::from(p.translation_m)),
+            nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z)),
+        )
+    };
+    if let Some(p) = &file.extrinsics.radar {
+        cfg.classical.mounting.radar = place(p);
+    }
+    if let Some(p) = &file.extrinsics.imu {
+        cfg.classical.mounting.imu = place(p);
+    }
+    let input = match &a.session {
+        Some(dir) => Input::Session {
+            dir: dir.clone(),
+            realtime: a.realtime,
+        },
+        None => Input::Devices(Devices {
+            radar_cli: a.radar_cli.clone().or(file.radar.cli.clone()),
+            radar_data,
+            radar_cfg: a.radar_cfg.clone().or(file.radar.cfg.clone()),
+            radar_baud: a.radar_baud.or(file.radar.baud).unwrap_or(921_600),
+            imu,
+            imu_baud: a.imu_baud.or(file.imu.baud).unwrap_or(115_200),
+            imu_wrap_day: file.imu.wrap.as_deref() == Some("day"),
+            configure: !a.no_configure,
+        }),
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        // A second Ctrl-C exits at once (status 130).
+        signal_hook::flag::register_conditional_shutdown(sig, 130, Arc::clone(&stop))?;
+        signal_hook::flag::register(sig, Arc::clone(&stop))?;
+    }
+    let summary = run_pipeline(&input, &cfg, stop)?;
+    let text = serde_json::to_string_pretty(&summary.json)?;
+    eprintln!("{text}");
+    if let Some(p) = a.summary_json.as_ref().or(file.summary_json.as_ref()) {
+        std::fs::write(p, &text).map_err(|e| format!("{}: {e}", p.display()))?;
+    }
+    Ok(())
+}

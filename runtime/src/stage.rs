@@ -1,0 +1,423 @@
+//! The estimator stage: runs the estimator(s) on the synchroniser's ordered stream, composes the
+//! trajectory, builds pose messages (radar rate, and IMU-propagated ones flagged PREDICTED), and
+//! decides the health flags.
+
+use crate::composer::{wxyz_f32, Composer};
+use crate::estimator::{Built, ImuInput, Mounting, RadarInput};
+use crate::reader::RadarItem;
+use crate::sync::SyncOut;
+use milliego_odometry::strapdown::{ImuSample, NavState, Strapdown, STANDARD_GRAVITY};
+use nalgebra::{Isometry3, Vector3};
+use pose_link::{Estimator as Code, Health, PoseMessage};
+
+/// IMU samples kept to re-integrate the prediction from a radar-rate pose that arrives after
+/// later samples were previewed.
+const RECENT: usize = 256;
+
+/// A pose on its way to the outputs.
+#[derive(Debug, Clone, Copy)]
+pub struct PoseOut {
+    /// The message (seq and host time filled by the output stage).
+    pub msg: PoseMessage,
+    /// Time \[s\] on the common clock.
+    pub t: f64,
+    /// Host read time of the input that produced it \[ns since the epoch\].
+    pub read_ns: u64,
+    /// When the estimator stage emitted it \[ns since the epoch\].
+    pub emitted_ns: u64,
+}
+
+/// Settings of the estimator stage.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StageConfig {
+    /// Publish IMU-propagated poses between radar-rate poses (PREDICTED).
+    pub imu_rate_output: bool,
+    /// Sensor placement (to propagate the body pose with the IMU).
+    pub mounting: Mounting,
+}
+
+/// Counters of the estimator stage.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StageCounters {
+    /// Radar-rate poses.
+    pub radar_poses: u64,
+    /// Predicted poses.
+    pub predicted_poses: u64,
+    /// Radar frames that produced no pose (levelling, model stride).
+    pub no_pose: u64,
+    /// Estimator errors.
+    pub errors: u64,
+    /// Origin resets.
+    pub resets: u64,
+}
+
+/// The estimator stage.
+pub struct Stage {
+    cfg: StageConfig,
+    built: Built,
+    use_fallback: bool,
+    /// The trajectory.
+    pub composer: Composer,
+    predict: Option<Strapdown>,
+    // World pose of the IMU-integration frame's origin: predicted poses are the last radar-rate
+    // pose moved by what the IMU integrated since.
+    anchor: Option<(Isometry3<f64>, NavState)>,
+    last_imu: Option<ImuSample>,
+    last_radar_rate_t: f64,
+    pending_reset: bool,
+    previews: bool,
+    recent: [ImuSample; RECENT],
+    recent_head: usize,
+    recent_len: usize,
+    /// Counters.
+    pub counters: StageCounters,
+}
+
+impl std::fmt::Debug for Stage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Stage")
+            .field("built", &self.built)
+            .field("counters", &self.counters)
+            .finish()
+    }
+}
+
+impl Stage {
+    /// A stage running `built`.
+    pub fn new(cfg: StageConfig, built: Built) -> Self {
+        Stage {
+            cfg,
+            built,
+            use_fallback: false,
+            composer: Composer::default(),
+            predict: None,
+            anchor: None,
+            last_imu: None,
+            last_radar_rate_t: f64::NEG_INFINITY,
+            pending_reset: false,
+            previews: false,
+            recent: [ImuSample {
+                t: 0.0,
+                accel: [0.0; 3],
+                gyro: [0.0; 3],
+            }; RECENT],
+            recent_head: 0,
+            recent_len: 0,
+            counters: StageCounters::default(),
+        }
+    }
+
+    fn code(&self, radar_missing: bool) -> Code {
+        let name = if self.use_fallback {
+            self.built.fallback.as_ref().map_or("doppler", |e| e.name())
+        } else {
+            self.built.primary.name()
+        };
+        if radar_missing {
+            return Code::Imu;
+        }
+        match name {
+            "model" => Code::Model,
+            "imu" => Code::Imu,
+            _ => Code::Doppler,
+        }
+    }
+
+    fn flags(&self, health: Health) -> Health {
+        let mut h = health.0;
+        if self.built.model_fallback || self.use_fallback {
+            h |= Health::MODEL_FALLBACK.0;
+        }
+        Health(h)
+    }
+
+    /// Processes one synchroniser output; `emit` gets each pose; `recycle` gets radar boxes back.
+    pub fn process(
+        &mut self,
+        ev: SyncOut,
+        now_ns: u64,
+        mut emit: impl FnMut(PoseOut),
+        recycle: impl FnOnce(Box<RadarItem>),
+    ) {
+        match ev {
+            SyncOut::Imu {
+                input,
+                read_ns,
+                health,
+            } => {
+                self.on_imu(&input, read_ns, health, now_ns, &mut emit);
+            }
+            SyncOut::Preview {
+                input,
+                read_ns,
+                health,
+            } => self.on_preview(&input, read_ns, health, now_ns, &mut emit),
+            SyncOut::Radar { item, health } => {
+                self.on_radar(&item, health, now_ns, &mut emit);
+                recycle(item);
+            }
+            SyncOut::Tick { t, health } => {
+                // Radar (and maybe IMU) missing: the last known pose, flagged.
+                if let Some(p) = self.predicted_pose() {
+                    let msg = self.message(
+                        &p,
+                        None,
+                        Health(self.flags(health).0 | Health::PREDICTED.0),
+                        t,
+                        true,
+                    );
+                    self.counters.predicted_poses += 1;
+                    emit(PoseOut {
+                        msg,
+                        t,
+                        read_ns: now_ns,
+                        emitted_ns: now_ns,
+                    });
+                }
+            }
+        }
+    }
+
+    fn on_imu(
+        &mut self,
+        s: &ImuInput,
+        read_ns: u64,
+        health: Health,
+        now_ns: u64,
+        emit: &mut impl FnMut(PoseOut),
+    ) {
+        self.built.primary.push_imu(s);
+        if let Some(f) = self.built.fallback.as_mut() {
+            f.push_imu(s);
+        }
+        let sample = ImuSample {
+            t: s.t,
+            accel: s.accel,
+            gyro: s.gyro,
+        };
+        self.last_imu = Some(sample);
+        if self.previews {
+            // The previews already propagated and published this sample.
+            return;
+        }
+        let Some(sd) = self.predict.as_mut() else {
+            return;
+        };
+        sd.push(sample);
+        let radar_missing = health.contains(Health::RADAR_MISSING);
+        // Between radar-rate poses at IMU rate when asked; while the radar is missing, at least
+        // once per radar period so the stream keeps flagging the gap.
+        let due =
+            self.cfg.imu_rate_output || (radar_missing && s.t - self.last_radar_rate_t >= 0.1);
+        if !due {
+            return;
+        }
+        if radar_missing {
+            self.last_radar_rate_t = s.t;
+        }
+        if let Some(p) = self.predicted_pose() {
+            let msg = self.message(
+                &p,
+                None,
+                Health(self.flags(health).0 | Health::PREDICTED.0),
+                s.t,
+                radar_missing,
+            );
+            self.counters.predicted_poses += 1;
+            emit(PoseOut {
+                msg,
+                t: s.t,
+                read_ns,
+                emitted_ns: now_ns,
+            });
+        }
+    }
+
+    /// An IMU sample as it arrived (before the estimator sees it in order): propagate the
+    /// prediction and publish it at once.
+    fn on_preview(
+        &mut self,
+        s: &ImuInput,
+        read_ns: u64,
+        health: Health,
+        now_ns: u64,
+        emit: &mut impl FnMut(PoseOut),
+    ) {
+        self.previews = true;
+        let sample = ImuSample {
+            t: s.t,
+            accel: s.accel,
+            gyro: s.gyro,
+        };
+        self.recent[self.recent_head] = sample;
+        self.recent_head = (self.recent_head + 1) % RECENT;
+        self.recent_len = (self.recent_len + 1).min(RECENT);
+        let Some(sd) = self.predict.as_mut() else {
+            return;
+        };
+        sd.push(sample);
+        let radar_missing = health.contains(Health::RADAR_MISSING);
+        if let Some(p) = self.predicted_pose() {
+            let msg = self.message(
+                &p,
+                None,
+                Health(self.flags(health).0 | Health::PREDICTED.0),
+                s.t,
+                radar_missing,
+            );
+            self.counters.predicted_poses += 1;
+            emit(PoseOut {
+                msg,
+                t: s.t,
+                read_ns,
+                emitted_ns: now_ns,
+            });
+        }
+    }
+
+    /// World pose propagated with the IMU since the last radar-rate pose.
+    fn predicted_pose(&self) -> Option<Isometry3<f64>> {
+        let (anchor_pose, anchor_nav) = self.anchor.as_ref()?;
+        let Some(sd) = self.predict.as_ref() else {
+            return Some(*anchor_pose);
+        };
+        let m = &self.cfg.mounting;
+        let body = |n: &NavState| Isometry3::from_parts(n.p.into(), n.q) * m.imu.inverse();
+        Some(anchor_pose * (body(anchor_nav).inverse() * body(sd.state())))
+    }
+
+    fn on_radar(
+        &mut self,
+        item: &RadarItem,
+        health: Health,
+        now_ns: u64,
+        emit: &mut impl FnMut(PoseOut),
+    ) {
+        let f = RadarInput {
+            t: item.t.unwrap_or(item.host_s),
+            frame_number: item.frame_number,
+            points: &item.points,
+        };
+        let r = if self.use_fallback {
+            self.built
+                .fallback
+                .as_mut()
+                .and_then(|e| e.push_radar(&f).ok().flatten())
+        } else {
+            let res = self.built.primary.push_radar(&f);
+            let fb = self.built.fallback.as_mut().map(|e| e.push_radar(&f));
+            match (res, fb) {
+                (Ok(r), _) if self.built.primary.healthy() => r,
+                (res, Some(fb)) => {
+                    if let Err(e) = res {
+                        tracing::warn!(error = %e, "primary estimator failed");
+                    }
+                    tracing::warn!("primary estimator unhealthy: switching to the fallback");
+                    self.use_fallback = true;
+                    self.composer.clear();
+                    fb.ok().flatten()
+                }
+                (Ok(r), None) => r,
+                (Err(e), None) => {
+                    self.counters.errors += 1;
+                    tracing::warn!(error = %e, "estimator error");
+                    None
+                }
+            }
+        };
+        let Some(r) = r else {
+            self.counters.no_pose += 1;
+            return;
+        };
+        let c = self.composer.push(&r);
+        if c.reset {
+            self.counters.resets += 1;
+        }
+        self.last_radar_rate_t = r.t_to;
+        // Restart the IMU propagation from this pose.
+        let m = self.cfg.mounting;
+        let imu_pose = c.pose * m.imu;
+        let nav = NavState {
+            t: r.t_to,
+            q: imu_pose.rotation,
+            p: imu_pose.translation.vector,
+            v: r.velocity_world.unwrap_or_else(Vector3::zeros),
+        };
+        let mut sd = Strapdown::new(nav, STANDARD_GRAVITY);
+        if self.previews {
+            // Samples already previewed past this frame: integrate them again from the new pose.
+            let mut first = true;
+            for k in 0..self.recent_len {
+                let x = self.recent[(self.recent_head + RECENT - self.recent_len + k) % RECENT];
+                if x.t < r.t_to {
+                    continue;
+                }
+                if first {
+                    sd.push(ImuSample { t: r.t_to, ..x });
+                    first = false;
+                }
+                if x.t > r.t_to {
+                    sd.push(x);
+                }
+            }
+        } else if let Some(last) = self.last_imu {
+            sd.push(ImuSample {
+                t: r.t_to.max(last.t),
+                ..last
+            });
+        }
+        self.predict = Some(sd);
+        self.anchor = Some((c.pose, nav));
+        let mut flags = self.flags(health);
+        if c.reset || self.pending_reset {
+            flags = Health(flags.0 | Health::RESET.0);
+            self.pending_reset = false;
+        }
+        let msg = self.message(
+            &c.pose,
+            Some(&c.rel),
+            flags,
+            r.t_to,
+            health.contains(Health::RADAR_MISSING),
+        );
+        self.counters.radar_poses += 1;
+        emit(PoseOut {
+            msg,
+            t: r.t_to,
+            read_ns: item.read_ns,
+            emitted_ns: now_ns,
+        });
+    }
+
+    fn message(
+        &self,
+        pose: &Isometry3<f64>,
+        rel: Option<&Isometry3<f64>>,
+        health: Health,
+        t: f64,
+        radar_missing: bool,
+    ) -> PoseMessage {
+        let p = pose.translation.vector;
+        let rel = rel.copied().unwrap_or_else(|| {
+            self.composer
+                .last()
+                .map_or(Isometry3::identity(), |l| l.pose.inverse() * pose)
+        });
+        PoseMessage {
+            health,
+            estimator: self.code(radar_missing),
+            seq: 0,
+            sensor_time_ns: (t.max(0.0) * 1e9) as u64,
+            host_time_ns: 0,
+            position: [p.x, p.y, p.z],
+            orientation: wxyz_f32(&pose.rotation),
+            rel_translation: [
+                rel.translation.x as f32,
+                rel.translation.y as f32,
+                rel.translation.z as f32,
+            ],
+            rel_rotation: wxyz_f32(&rel.rotation),
+            dropped_total: 0,
+        }
+    }
+}

@@ -1,0 +1,739 @@
+//! Sensor-clock alignment, online: each sensor clock is mapped to the host clock by a sliding-window
+//! fit on the lower envelope of (sensor time, host time of the first byte) pairs, the online form of
+//! [`milliego_session::streams::ClockFit`]. Host stamps only ever carry extra delay (UART, USB,
+//! scheduling), so the earliest arrivals are the truth; a stamp far above the envelope is rejected
+//! as late and never enters the window.
+
+/// Settings of an [`OnlineClock`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClockConfig {
+    /// Pairs in the sliding window.
+    pub window: usize,
+    /// Pairs needed before the clock counts as synchronised.
+    pub min_pairs: usize,
+    /// Sensor-time span below which only the offset is fitted (rate 1) \[s\]: a short span
+    /// cannot tell drift from jitter.
+    pub min_rate_span_s: f64,
+    /// A stamp later than the envelope by more than this is rejected \[s\].
+    pub late_s: f64,
+    /// After this many rejections in a row the window restarts (the clock jumped).
+    pub restart_after: u32,
+    /// Refit every this many accepted pairs.
+    pub refit_every: u32,
+}
+
+impl Default for ClockConfig {
+    fn default() -> Self {
+        ClockConfig {
+            window: 1024,
+            min_pairs: 16,
+            min_rate_span_s: 4.0,
+            late_s: 0.02,
+            restart_after: 50,
+            refit_every: 1,
+        }
+    }
+}
+
+/// Online sensor-to-host clock map, `host = offset + rate * sensor`.
+#[derive(Debug, Clone)]
+pub struct OnlineClock {
+    cfg: ClockConfig,
+    ring: Vec<(f64, f64)>,
+    head: usize,
+    len: usize,
+    keep: Vec<(f64, f64)>,
+    scratch: Vec<f64>,
+    offset: f64,
+    rate: f64,
+    fitted: bool,
+    since_fit: u32,
+    rejected_run: u32,
+    /// Pairs accepted into the window.
+    pub accepted: u64,
+    /// Pairs rejected as late.
+    pub rejected_late: u64,
+    /// Window restarts after runs of rejections.
+    pub restarts: u64,
+}
+
+impl OnlineClock {
+    /// A clock with `cfg` (all buffers allocated here, none later).
+    pub fn new(cfg: ClockConfig) -> Self {
+        let w = cfg.window.max(2);
+        OnlineClock {
+            cfg,
+            ring: vec![(0.0, 0.0); w],
+            head: 0,
+            len: 0,
+            keep: Vec::with_capacity(w),
+            scratch: Vec::with_capacity(w),
+            offset: 0.0,
+            rate: 1.0,
+            fitted: false,
+            since_fit: 0,
+            rejected_run: 0,
+            accepted: 0,
+            rejected_late: 0,
+            restarts: 0,
+        }
+    }
+
+    /// True once enough pairs are in the window.
+    pub fn synced(&self) -> bool {
+        self.fitted && self.len >= self.cfg.min_pairs
+    }
+
+    /// Current map (offset \[s\], rate), if any pair was seen.
+    pub fn map(&self) -> Option<(f64, f64)> {
+        self.fitted.then_some((self.offset, self.rate))
+    }
+
+    /// Host time of a sensor time \[s\] (the identity shifted by the first pair before a fit).
+    pub fn host(&self, sensor_s: f64) -> f64 {
+        self.offset + self.rate * sensor_s
+    }
+
+    /// Adds a pair: sensor time \[s\] and host time at which the message STARTED arriving \[s\]
+    /// (last-byte stamp less its transmission time). Returns false when rejected as late.
+    pub fn push(&mut self, sensor_s: f64, host_s: f64) -> bool {
+        if !(sensor_s.is_finite() && host_s.is_finite()) {
+            return false;
+        }
+        if self.synced() && host_s - self.host(sensor_s) > self.cfg.late_s {
+            self.rejected_late += 1;
+            self.rejected_run += 1;
+            if self.rejected_run < self.cfg.restart_after {
+                return false;
+            }
+            self.restarts += 1;
+            self.len = 0;
+            self.fitted = false;
+        }
+        self.rejected_run = 0;
+        let w = self.ring.len();
+        self.ring[self.head] = (sensor_s, host_s);
+        self.head = (self.head + 1) % w;
+        self.len = (self.len + 1).min(w);
+        self.accepted += 1;
+        self.since_fit += 1;
+        if !self.fitted || self.since_fit >= self.cfg.refit_every {
+            self.refit();
+        }
+        true
+    }
+
+    fn refit(&mut self) {
+        self.since_fit = 0;
+        let w = self.ring.len();
+        self.keep.clear();
+        for k in 0..self.len {
+            self.keep
+                .push(self.ring[(self.head + w - self.len + k) % w]);
+        }
+        let Some((mut smin, mut smax)) = self.keep.first().map(|p| (p.0, p.0)) else {
+            return;
+        };
+        for p in &self.keep {
+            smin = smin.min(p.0);
+            smax = smax.max(p.0);
+        }
+        let fit_rate = smax - smin >= self.cfg.min_rate_span_s;
+        let mut fit = None;
+        for _ in 0..4 {
+            let Some(f) = fit_line(&self.keep, fit_rate) else {
+                break;
+            };
+            fit = Some(f);
+            // Keep the lower envelope: residuals at or below the 25th percentile.
+            self.scratch.clear();
+            self.scratch
+                .extend(self.keep.iter().map(|(s, h)| h - (f.0 + f.1 * s)));
+            let k = self.scratch.len() / 4;
+            let (_, cut, _) = self.scratch.select_nth_unstable_by(k, f64::total_cmp);
+            let cut = *cut;
+            let before = self.keep.len();
+            self.keep.retain(|(s, h)| h - (f.0 + f.1 * s) <= cut);
+            if self.keep.len() < 2 || self.keep.len() == before {
+                break;
+            }
+        }
+        if let Some((o, r)) = fit {
+            self.offset = o;
+            self.rate = r;
+            self.fitted = true;
+        } else if let Some(&(s, h)) = self.keep.first() {
+            // One pair: offset only.
+            self.offset = h - s;
+            self.rate = 1.0;
+            self.fitted = true;
+        }
+    }
+}
+
+/// Least squares `host = offset + rate * sensor` (rate fixed at 1 unless `fit_rate`).
+fn fit_line(p: &[(f64, f64)], fit_rate: bool) -> Option<(f64, f64)> {
+    if p.is_empty() || (fit_rate && p.len() < 2) {
+        return None;
+    }
+    let n = p.len() as f64;
+    // Centred on the first sensor time for precision.
+    let s0 = p[0].0;
+    let ms = p.iter().map(|x| x.0 - s0).sum::<f64>() / n;
+    let mh = p.iter().map(|x| x.1).sum::<f64>() / n;
+    let rate = if fit_rate {
+        let sss: f64 = p.iter().map(|x| (x.0 - s0 - ms).powi(2)).sum();
+        if sss <= 0.0 {
+            return None;
+        }
+        p.iter().map(|x| (x.0 - s0 - ms) * (x.1 - mh)).sum::<f64>() / sss
+    } else {
+        1.0
+    };
+    // host = mh + rate (s - s0 - ms)
+    Some((mh - rate * (s0 + ms), rate))
+}
+
+/// Time on the wire of `bytes` at `baud` \[s\] (8N1: 10 bits a byte).
+pub fn tx_s(bytes: usize, baud: u32) -> f64 {
+    bytes as f64 * 10.0 / f64::from(baud.max(1))
+}
+
+use crate::reader::{ImuItem, RadarItem};
+use pose_link::Health;
+use std::collections::VecDeque;
+
+/// What the synchroniser releases, in the order estimators must see it.
+#[derive(Debug)]
+pub enum SyncOut {
+    /// An IMU sample (time on the common clock).
+    Imu {
+        /// Sample.
+        input: crate::estimator::ImuInput,
+        /// Host read time of the sample \[ns since the epoch\].
+        read_ns: u64,
+        /// Sensor and clock flags.
+        health: Health,
+    },
+    /// A radar frame (`t` set).
+    Radar {
+        /// Frame.
+        item: Box<RadarItem>,
+        /// Sensor and clock flags.
+        health: Health,
+    },
+    /// An IMU sample as soon as it arrives, before it is put in order (IMU-rate prediction
+    /// only; the same sample comes again as [`SyncOut::Imu`] for the estimator).
+    Preview {
+        /// Sample.
+        input: crate::estimator::ImuInput,
+        /// Host read time of the sample \[ns since the epoch\].
+        read_ns: u64,
+        /// Sensor and clock flags.
+        health: Health,
+    },
+    /// Radar is missing: a pose is due anyway (once per radar period).
+    Tick {
+        /// Time on the common clock \[s\].
+        t: f64,
+        /// Sensor and clock flags.
+        health: Health,
+    },
+}
+
+/// Settings of the [`Synchroniser`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SyncConfig {
+    /// Radar frame period \[s\] (from the `.cfg`; measured when None).
+    pub radar_period_s: Option<f64>,
+    /// A stream is missing after this many of its periods without data.
+    pub stall_periods: f64,
+    /// Radar UART rate \[bit/s\].
+    pub radar_baud: u32,
+    /// IMU UART rate \[bit/s\].
+    pub imu_baud: u32,
+    /// Half the active chirping of a frame \[s\].
+    pub half_chirps_s: f64,
+    /// Longest an IMU sample waits for a radar frame due before it \[s\].
+    pub max_hold_s: f64,
+    /// Whether a radar stream is expected at all.
+    pub radar_enabled: bool,
+    /// Whether an IMU stream is expected at all.
+    pub imu_enabled: bool,
+    /// Clock fits.
+    pub clock: ClockConfig,
+    /// Emit every IMU sample at once as [`SyncOut::Preview`] (IMU-rate output).
+    pub preview_imu: bool,
+}
+
+impl Default for SyncConfig {
+    fn default() -> Self {
+        SyncConfig {
+            radar_period_s: None,
+            stall_periods: 3.0,
+            radar_baud: 921_600,
+            imu_baud: 115_200,
+            half_chirps_s: 0.0,
+            max_hold_s: 0.25,
+            radar_enabled: true,
+            imu_enabled: true,
+            clock: ClockConfig::default(),
+            preview_imu: false,
+        }
+    }
+}
+
+/// Counters of the synchroniser.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SyncCounters {
+    /// Radar frames released.
+    pub radar: u64,
+    /// IMU samples released.
+    pub imu: u64,
+    /// Radar frames released after the IMU had passed their time.
+    pub radar_late: u64,
+    /// Items dropped because the synchroniser's own buffers were full.
+    pub dropped: u64,
+    /// Times the radar was declared missing.
+    pub radar_gaps: u64,
+    /// Times the IMU was declared missing.
+    pub imu_gaps: u64,
+    /// Items held while the clocks were not yet synchronised (start-up), re-timed after.
+    pub warmup: u64,
+}
+
+/// Puts both streams on one clock and releases them in time order: each radar frame right after
+/// the first IMU sample at or past its time (the order the offline runner uses), IMU samples held
+/// only while a radar frame may still be due before them. Detects stalled streams.
+#[derive(Debug)]
+pub struct Synchroniser {
+    cfg: SyncConfig,
+    /// Radar clock.
+    pub radar_clock: OnlineClock,
+    /// IMU clock.
+    pub imu_clock: OnlineClock,
+    radar: VecDeque<Box<RadarItem>>,
+    imu: VecDeque<ImuItem>,
+    last_radar_t: Option<f64>,
+    last_imu_t: Option<f64>,
+    radar_period: Option<f64>,
+    imu_period: Option<f64>,
+    last_radar_host: Option<f64>,
+    last_imu_host: Option<f64>,
+    start_host: Option<f64>,
+    radar_missing: bool,
+    imu_missing: bool,
+    last_tick: f64,
+    imu_done_t: Option<f64>,
+    released_t: f64,
+    retimed: bool,
+    last_virtual: f64,
+    virtual_frame: u32,
+    unpreviewed: usize,
+    last_imu_seen: Option<f64>,
+    /// Set when items carry precomputed times from an offline clock fit.
+    pub offline_clock: bool,
+    /// Set for sessions: stalls are judged on the streams' data times, not on arrival.
+    pub data_time: bool,
+    /// Counters.
+    pub counters: SyncCounters,
+}
+
+impl Synchroniser {
+    /// A synchroniser (buffers allocated here).
+    pub fn new(cfg: SyncConfig) -> Self {
+        Synchroniser {
+            cfg,
+            radar_clock: OnlineClock::new(cfg.clock),
+            imu_clock: OnlineClock::new(ClockConfig {
+                refit_every: 10,
+                ..cfg.clock
+            }),
+            radar: VecDeque::with_capacity(128),
+            imu: VecDeque::with_capacity(4096),
+            last_radar_t: None,
+            last_imu_t: None,
+            radar_period: cfg.radar_period_s,
+            imu_period: None,
+            last_radar_host: None,
+            last_imu_host: None,
+            start_host: None,
+            radar_missing: false,
+            imu_missing: false,
+            last_tick: f64::NEG_INFINITY,
+            imu_done_t: None,
+            released_t: f64::NEG_INFINITY,
+            retimed: false,
+            last_virtual: f64::NEG_INFINITY,
+            virtual_frame: 0,
+            unpreviewed: 0,
+            last_imu_seen: None,
+            offline_clock: false,
+            data_time: false,
+            counters: SyncCounters::default(),
+        }
+    }
+
+    /// Radar frame period in use \[s\].
+    pub fn radar_period(&self) -> f64 {
+        self.radar_period.unwrap_or(0.1)
+    }
+
+    /// IMU sample period in use \[s\].
+    pub fn imu_period(&self) -> f64 {
+        self.imu_period.unwrap_or(0.01)
+    }
+
+    fn radar_time(&self, item: &RadarItem) -> f64 {
+        let ready = match item.sensor_s {
+            Some(s) => self.radar_clock.host(s),
+            None => item.host_s - tx_s(item.bytes, self.cfg.radar_baud),
+        };
+        ready - item.processing_s - self.cfg.half_chirps_s
+    }
+
+    /// Times of what was held while the clocks settled, from the settled fits.
+    fn retime(&mut self) {
+        for k in 0..self.radar.len() {
+            let t = self.radar_time(&self.radar[k]);
+            self.radar[k].t = Some(t);
+        }
+        self.last_radar_t = self.radar.back().and_then(|r| r.t).or(self.last_radar_t);
+        for k in 0..self.imu.len() {
+            let t = self.imu_clock.host(self.imu[k].sensor_s);
+            self.imu[k].t = Some(t);
+        }
+        self.retimed = true;
+    }
+
+    /// True once every expected stream's clock is synchronised (always for offline times).
+    pub fn clocks_ready(&self) -> bool {
+        self.offline_clock
+            || ((!self.cfg.radar_enabled || self.radar_clock.synced())
+                && (!self.cfg.imu_enabled || self.imu_clock.synced()))
+    }
+
+    /// Current flags (radar/IMU missing, clock unsynced).
+    pub fn health(&self) -> Health {
+        let mut h = 0;
+        if self.radar_missing {
+            h |= Health::RADAR_MISSING.0;
+        }
+        if self.imu_missing {
+            h |= Health::IMU_MISSING.0;
+        }
+        let unsynced = !self.offline_clock
+            && ((self.cfg.radar_enabled && !self.radar_clock.synced())
+                || (self.cfg.imu_enabled && !self.imu_clock.synced()));
+        if unsynced {
+            h |= Health::CLOCK_UNSYNCED.0;
+        }
+        Health(h)
+    }
+
+    /// Takes a radar frame; its box comes back out of [`Synchroniser::poll`] (or, when the
+    /// buffer overflows, through `recycle`).
+    pub fn push_radar(&mut self, mut item: Box<RadarItem>, recycle: impl FnOnce(Box<RadarItem>)) {
+        let t = match (item.t, item.sensor_s) {
+            (Some(t), _) => t,
+            (None, s) => {
+                if let Some(s) = s {
+                    let tx = tx_s(item.bytes, self.cfg.radar_baud);
+                    self.radar_clock.push(s, item.host_s - tx);
+                }
+                self.radar_time(&item)
+            }
+        };
+        item.t = Some(t);
+        tracing::trace!(frame = item.frame_number, t, sensor_s = ?item.sensor_s, host_s = item.host_s, "radar");
+        if !self.clocks_ready() {
+            self.counters.warmup += 1;
+        }
+        if self.cfg.radar_period_s.is_none() {
+            if let Some(prev) = self.last_radar_t {
+                let d = t - prev;
+                if d > 0.0 && d < 1.0 {
+                    let p = self.radar_period.unwrap_or(d);
+                    self.radar_period = Some(p + 0.1 * (d - p));
+                }
+            }
+        }
+        self.last_radar_t = Some(t);
+        self.last_radar_host = Some(item.host_s);
+        if self.radar.len() == self.radar.capacity() {
+            if let Some(old) = self.radar.pop_front() {
+                self.counters.dropped += 1;
+                recycle(old);
+            }
+        }
+        self.radar.push_back(item);
+    }
+
+    /// Takes an IMU sample.
+    pub fn push_imu(&mut self, mut item: ImuItem) {
+        let t = match item.t {
+            Some(t) => t,
+            None => {
+                self.imu_clock.push(
+                    item.sensor_s,
+                    item.host_s - tx_s(item.bytes, self.cfg.imu_baud),
+                );
+                self.imu_clock.host(item.sensor_s)
+            }
+        };
+        if let Some(prev) = self
+            .imu
+            .back()
+            .map(|s| s.t.unwrap_or(t))
+            .or(self.last_imu_t)
+        {
+            let d = t - prev;
+            if d > 0.0 && d < 0.5 {
+                let p = self.imu_period.unwrap_or(d);
+                self.imu_period = Some(p + 0.05 * (d - p));
+            }
+        }
+        item.t = Some(t);
+        self.last_imu_seen = Some(self.last_imu_seen.map_or(t, |l| l.max(t)));
+        tracing::trace!(t, sensor_s = item.sensor_s, host_s = item.host_s, "imu");
+        if !self.clocks_ready() {
+            self.counters.warmup += 1;
+        }
+        self.last_imu_host = Some(item.host_s);
+        if self.imu.len() == self.imu.capacity() {
+            self.imu.pop_front();
+            self.counters.dropped += 1;
+        }
+        self.imu.push_back(item);
+        self.unpreviewed = (self.unpreviewed + 1).min(self.imu.len());
+    }
+
+    fn stalls(&mut self, now: f64) {
+        let start = *self.start_host.get_or_insert(now);
+        // Sessions run on data time: the streams' own times on the common clock (host stamps of
+        // the two streams lead each other by the radar's processing and transfer time).
+        let (now, last_radar, last_imu) = if self.data_time {
+            (now, self.last_radar_t, self.last_imu_seen)
+        } else {
+            (now, self.last_radar_host, self.last_imu_host)
+        };
+        let start = if self.data_time {
+            now.min(start)
+        } else {
+            start
+        };
+        let margin = 0.05;
+        let rm = self.cfg.radar_enabled
+            && now - last_radar.unwrap_or(start)
+                > self.cfg.stall_periods * self.radar_period() + margin;
+        let im = self.cfg.imu_enabled
+            && now - last_imu.unwrap_or(start)
+                > self.cfg.stall_periods * self.imu_period() + margin;
+        if rm && !self.radar_missing {
+            self.counters.radar_gaps += 1;
+            tracing::warn!(now, "radar missing");
+        }
+        if im && !self.imu_missing {
+            self.counters.imu_gaps += 1;
+            tracing::warn!(now, "IMU missing");
+        }
+        if !rm && self.radar_missing {
+            tracing::warn!(now, "radar back");
+        }
+        if !im && self.imu_missing {
+            tracing::warn!(now, "IMU back");
+        }
+        self.radar_missing = rm;
+        self.imu_missing = im;
+    }
+
+    /// Releases what can go at host time `now` \[s since the epoch\] (sessions: the feeder's
+    /// watermark on the common clock), in order.
+    pub fn poll(&mut self, now: f64, mut emit: impl FnMut(SyncOut)) {
+        // Sessions: `now` is the feeder's watermark on the common clock (everything up to it has
+        // been pushed), so a stream behind it by more than its stall time really has a gap.
+        if !now.is_finite() {
+            return;
+        }
+        self.stalls(now);
+        if !self.clocks_ready() {
+            // Times from a clock fit of a few pairs are not good enough to start on: hold
+            // everything, then re-time it from the settled fits.
+            return;
+        }
+        if !self.retimed && !self.offline_clock {
+            self.retime();
+        }
+        let health = self.health();
+        if self.cfg.preview_imu {
+            let n = self.imu.len();
+            for k in n - self.unpreviewed.min(n)..n {
+                let s = self.imu[k];
+                emit(SyncOut::Preview {
+                    input: crate::estimator::ImuInput {
+                        t: s.t.unwrap_or(0.0),
+                        accel: s.accel,
+                        gyro: s.gyro,
+                    },
+                    read_ns: s.read_ns,
+                    health,
+                });
+            }
+        }
+        self.unpreviewed = 0;
+        loop {
+            // Radar frames the IMU passed before they arrived (late), or that cannot wait.
+            if let Some(r) = self.radar.front() {
+                let rt = r.t.unwrap_or(0.0);
+                let late = self.imu_done_t.is_some_and(|ti| rt <= ti);
+                let no_imu = !self.cfg.imu_enabled
+                    || self.imu_missing
+                    || now - rt > self.cfg.max_hold_s + self.radar_period();
+                if late || (no_imu && self.imu.is_empty()) {
+                    if let Some(item) = self.radar.pop_front() {
+                        self.counters.radar_late += u64::from(late);
+                        self.counters.radar += 1;
+                        self.released_t = self.released_t.max(rt);
+                        self.last_tick = now;
+                        emit(SyncOut::Radar { item, health });
+                        continue;
+                    }
+                }
+            }
+            let Some(s) = self.imu.front().copied() else {
+                break;
+            };
+            let t = s.t.unwrap_or(0.0);
+            let may = !self.cfg.radar_enabled
+                || self.radar_missing
+                || !self.radar.is_empty()
+                || self.imu_done_t.is_none_or(|prev| {
+                    self.last_radar_t
+                        .is_some_and(|lr| prev < lr + 0.8 * self.radar_period())
+                })
+                || now - t > self.cfg.max_hold_s;
+            if !may {
+                break;
+            }
+            self.imu.pop_front();
+            self.imu_done_t = Some(t);
+            self.released_t = self.released_t.max(t);
+            self.counters.imu += 1;
+            emit(SyncOut::Imu {
+                input: crate::estimator::ImuInput {
+                    t,
+                    accel: s.accel,
+                    gyro: s.gyro,
+                },
+                read_ns: s.read_ns,
+                health,
+            });
+            // Without a radar stream, empty frames at the radar period give the estimator its
+            // radar-rate poses (IMU dead reckoning).
+            if !self.cfg.radar_enabled && t - self.last_virtual >= self.radar_period() {
+                self.last_virtual = t;
+                self.virtual_frame = self.virtual_frame.wrapping_add(1);
+                let item = Box::new(RadarItem {
+                    host_s: s.host_s,
+                    read_ns: s.read_ns,
+                    frame_number: self.virtual_frame,
+                    t: Some(t),
+                    ..RadarItem::default()
+                });
+                self.counters.radar += 1;
+                emit(SyncOut::Radar { item, health });
+            }
+            // Radar frames due at or before this sample go right after it (not counted late).
+            while self.radar.front().is_some_and(|r| r.t.unwrap_or(0.0) <= t) {
+                if let Some(item) = self.radar.pop_front() {
+                    self.counters.radar += 1;
+                    self.last_tick = now;
+                    emit(SyncOut::Radar { item, health });
+                }
+            }
+        }
+        if self.radar_missing && now - self.last_tick >= self.radar_period() {
+            self.last_tick = now;
+            emit(SyncOut::Tick { t: now, health });
+        }
+    }
+
+    /// Releases everything still held (end of stream), in order.
+    pub fn flush(&mut self, mut emit: impl FnMut(SyncOut)) {
+        let health = self.health();
+        while !self.radar.is_empty() || !self.imu.is_empty() {
+            let rt = self.radar.front().and_then(|r| r.t);
+            let it = self.imu.front().and_then(|s| s.t);
+            let radar_first = match (rt, it) {
+                (Some(r), Some(_)) => self.imu_done_t.is_some_and(|ti| r <= ti),
+                (Some(_), None) => true,
+                _ => false,
+            };
+            if radar_first {
+                if let Some(item) = self.radar.pop_front() {
+                    self.counters.radar += 1;
+                    emit(SyncOut::Radar { item, health });
+                }
+                continue;
+            }
+            let Some(s) = self.imu.pop_front() else {
+                break;
+            };
+            let t = s.t.unwrap_or(0.0);
+            self.imu_done_t = Some(t);
+            self.counters.imu += 1;
+            emit(SyncOut::Imu {
+                input: crate::estimator::ImuInput {
+                    t,
+                    accel: s.accel,
+                    gyro: s.gyro,
+                },
+                read_ns: s.read_ns,
+                health,
+            });
+            while self.radar.front().is_some_and(|r| r.t.unwrap_or(0.0) <= t) {
+                if let Some(item) = self.radar.pop_front() {
+                    self.counters.radar += 1;
+                    emit(SyncOut::Radar { item, health });
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recovers_offset_and_drift_from_delayed_stamps() {
+        let mut c = OnlineClock::new(ClockConfig::default());
+        assert!(!c.synced());
+        // 50 ppm drift, 2.5 s offset, delays 0..8 ms with a few 100 ms outliers.
+        let mut seed = 1u64;
+        for i in 0..2000 {
+            let s = i as f64 * 0.01;
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let u = (seed >> 11) as f64 / (1u64 << 53) as f64;
+            let delay = if i % 97 == 5 { 0.1 } else { u * 0.008 };
+            c.push(s, 2.5 + 1.00005 * s + delay);
+            if i < 15 {
+                assert!(!c.synced());
+            }
+        }
+        assert!(c.synced());
+        assert!(
+            c.rejected_late > 10,
+            "outliers rejected: {}",
+            c.rejected_late
+        );
+        let (o, r) = c.map().unwrap();
+        assert!((r - 1.00005).abs() < 2e-5, "rate {r}");
+        assert!(
+            (c.host(20.0) - (2.5 + 1.00005 * 20.0)).abs() < 1e-3,
+            "offset {o}"
+        );
+    }
+}

@@ -1,0 +1,202 @@
+//! The runtime's parts on a simulated session: the composer against ground truth, the online
+//! clock against the offline fit, and a whole offline run against `milliego odometry`'s runner.
+
+use milliego_eval::{evaluate, Settings, Trajectory};
+use milliego_odometry::offline::{run as run_offline, OfflineConfig};
+use milliego_runtime::composer::Composer;
+use milliego_runtime::estimator::{EstimatorKind, RelativePose};
+use milliego_runtime::output::OutputSpec;
+use milliego_runtime::pipeline::{run, Input, RunConfig};
+use milliego_runtime::sync::{tx_s, ClockConfig, OnlineClock};
+use milliego_session::streams::{imu_samples, radar_frames, ClockFit};
+use milliego_session::{Session, TumPose};
+use milliego_sim::motion::MotionKind;
+use milliego_sim::scenario::{run as simulate, Scenario};
+use milliego_sim::world::Family;
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+fn session(seed: u64) -> (tempfile::TempDir, Session) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut sc = Scenario::new(Family::Office, MotionKind::Handheld, seed);
+    sc.duration_s = 8.0;
+    simulate(&sc, dir.path(), &mut |_| {}).expect("simulate");
+    let s = Session::open(dir.path()).unwrap();
+    (dir, s)
+}
+
+fn iso(p: &TumPose) -> Isometry3<f64> {
+    let [x, y, z, w] = p.q;
+    Isometry3::from_parts(
+        Translation3::from(Vector3::from(p.p)),
+        UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
+    )
+}
+
+#[test]
+fn composing_ground_truth_relative_poses_reproduces_the_trajectory() {
+    let (_d, s) = session(11);
+    let gt = s.groundtruth().unwrap().expect("ground truth");
+    assert!(gt.len() > 100);
+    let mut c = Composer::default();
+    let mut prev: Option<(u32, f64, Isometry3<f64>)> = None;
+    for (k, p) in gt.iter().enumerate() {
+        let cur = iso(p);
+        let k = k as u32;
+        let r = match prev {
+            // rel = T(from)^-1 T(to): the body pose at `to` in the body frame at `from`.
+            Some((f, tf, pf)) => RelativePose {
+                from_frame: f,
+                to_frame: k,
+                t_from: tf,
+                t_to: p.t,
+                rel: pf.inverse() * cur,
+                velocity_world: None,
+            },
+            None => RelativePose {
+                from_frame: u32::MAX,
+                to_frame: k,
+                t_from: p.t,
+                t_to: p.t,
+                rel: cur,
+                velocity_world: None,
+            },
+        };
+        let out = c.push(&r);
+        assert_eq!(out.reset, prev.is_none());
+        let dp = (out.pose.translation.vector - cur.translation.vector).norm();
+        let da = out.pose.rotation.angle_to(&cur.rotation);
+        assert!(dp < 1e-6 && da < 1e-6, "pose {k}: {dp} m, {da} rad");
+        prev = Some((k, p.t, cur));
+    }
+}
+
+#[test]
+fn online_clock_converges_to_the_offline_fit() {
+    let (_d, s) = session(12);
+    let (frames, _) = radar_frames(&s).unwrap();
+    let (imu, _) = imu_samples(&s).unwrap();
+    let radar_baud = s.meta.radar.as_ref().map_or(921_600, |r| r.baud);
+    let imu_baud = s.meta.imu.as_ref().map_or(115_200, |r| r.baud);
+    let radar_pairs: Vec<(f64, f64)> = frames
+        .iter()
+        .filter_map(|f| Some((f.sensor_s?, f.host_s? - tx_s(f.bytes, radar_baud))))
+        .collect();
+    let imu_pairs: Vec<(f64, f64)> = imu
+        .iter()
+        .filter_map(|x| Some((x.sensor_s, x.host_s? - tx_s(x.bytes, imu_baud))))
+        .collect();
+    // Tolerance: 0.5 ms anywhere in the session (the IMU window holds ~5 of its 8 s).
+    for (pairs, name) in [(radar_pairs, "radar"), (imu_pairs, "imu")] {
+        let offline = ClockFit::fit(&pairs).expect("offline fit");
+        let mut online = OnlineClock::new(ClockConfig::default());
+        for (k, &(sn, h)) in pairs.iter().enumerate() {
+            assert_eq!(
+                online.synced(),
+                k >= 16,
+                "{name}: synced after 16 pairs, not before"
+            );
+            online.push(sn, h);
+        }
+        assert!(online.synced());
+        let (s0, s1) = (pairs[0].0, pairs[pairs.len() - 1].0);
+        for k in 0..=20 {
+            let sn = s0 + (s1 - s0) * f64::from(k) / 20.0;
+            let d = (online.host(sn) - offline.host(sn)).abs();
+            assert!(
+                d < 5e-4,
+                "{name}: online and offline maps differ by {d} s at {sn}"
+            );
+        }
+        println!(
+            "{name}: rate online {:.7} offline {:.7}",
+            online.map().unwrap().1,
+            offline.rate
+        );
+    }
+}
+
+fn read_tum(p: &std::path::Path) -> Vec<TumPose> {
+    std::fs::read_to_string(p)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            TumPose {
+                t: v[0],
+                p: [v[1], v[2], v[3]],
+                q: [v[4], v[5], v[6], v[7]],
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn offline_run_reproduces_milliego_odometry() {
+    let (d, s) = session(13);
+    let out = d.path().join("run.tum");
+    let cfg = RunConfig {
+        estimator: EstimatorKind::Doppler,
+        outputs: vec![OutputSpec::Tum(out.clone())],
+        ..RunConfig::default()
+    };
+    let input = Input::Session {
+        dir: d.path().to_path_buf(),
+        realtime: false,
+    };
+    let summary = run(&input, &cfg, Arc::new(AtomicBool::new(false))).expect("run");
+    assert_eq!(summary.dropped_total, 0, "sessions are fed without drops");
+    let mut ours = read_tum(&out);
+    // `milliego odometry` with its defaults (Doppler noise from the .cfg).
+    let mut ocfg = OfflineConfig::default();
+    let vres = s
+        .radar_cfg()
+        .unwrap()
+        .and_then(|t| radar_driver::cfg::RadarConfig::parse(&t).ok())
+        .and_then(|c| c.derive(None).ok())
+        .map(|d| d.velocity_resolution_mps as f32);
+    ocfg.ego.sigma = vres.unwrap() / 2.0;
+    let theirs = run_offline(&s, &ocfg).unwrap().trajectory;
+    // The runtime has no pose during the 1 s levelling window; every later pose is the same
+    // (frames after the last IMU sample, which the offline runner leaves out, aside).
+    let last = theirs.last().unwrap().t;
+    ours.retain(|p| p.t <= last + 1e-9);
+    assert!(ours.len() + 25 >= theirs.len() && ours.len() < theirs.len());
+    let mut matched = 0;
+    let mut common = Vec::new();
+    for p in &ours {
+        let q = theirs
+            .iter()
+            .find(|q| (q.t - p.t).abs() < 1e-6)
+            .unwrap_or_else(|| {
+                panic!(
+                    "runtime pose at {} is at no frame time of the offline run (first {:?})",
+                    p.t,
+                    theirs.first().map(|q| q.t)
+                )
+            });
+        let d = (0..3).map(|i| (p.p[i] - q.p[i]).abs()).fold(0.0, f64::max);
+        assert!(d < 2e-6, "pose at {}: {d} m apart", p.t);
+        matched += 1;
+        common.push(*q);
+    }
+    assert_eq!(matched, ours.len());
+    let gt = Trajectory::from_tum(&s.groundtruth().unwrap().unwrap());
+    let ate = |t: &[TumPose]| {
+        evaluate(&gt, &Trajectory::from_tum(t), &Settings::default())
+            .unwrap()
+            .ate
+            .rmse
+    };
+    let (a, b, full) = (ate(&ours), ate(&common), ate(&theirs));
+    println!(
+        "ATE: runtime {a:.4} m, odometry on the same frames {b:.4} m, odometry with the levelling window {full:.4} m; {} frames in {:.3} s",
+        ours.len(),
+        summary.wall_s
+    );
+    assert!((a - b).abs() <= 0.05 * b, "ATE {a} vs {b}");
+    // The whole offline trajectory also scores the levelling second, which the runtime cannot
+    // give (no filter yet): printed above, not compared (3% here, 9% on a 30 s session).
+}
