@@ -56,8 +56,17 @@ def test_export_quantize_golden_roundtrip(stateful_run, datasets, tmp_path):
         assert n.domain in ("", "ai.onnx"), n
         assert n.op_type in ALLOWED_OPS, n.op_type
     qops = {n.op_type for n in q.graph.node}
-    assert {"QLinearConv", "QLinearMatMul", "QuantizeLinear", "DequantizeLinear"} <= qops
-    assert "Conv" not in qops and "MatMul" not in qops  # everything quantizable was quantized
+    # Default recipe: every convolution int8, dense layers and LSTMs fp32.
+    assert {"QLinearConv", "QuantizeLinear", "DequantizeLinear"} <= qops
+    assert "Conv" not in qops and "QLinearMatMul" not in qops and "MatMul" in qops
+    # --ops conv+matmul quantizes the MatMuls too, except the one fed by the raw IMU window.
+    int8mm = str(int8).replace(".onnx", "-mm.onnx")
+    run("milliego_models.quantize", "--model", fp32, "--data", datasets[0], "--out", int8mm,
+        "--calib-windows", "32", "--ops", "conv+matmul")
+    qm = onnx.load(int8mm)
+    mm = [n for n in qm.graph.node if n.op_type == "MatMul"]
+    assert {n.op_type for n in qm.graph.node} >= {"QLinearConv", "QLinearMatMul"}
+    assert mm and all("imu" in n.input for n in mm), [n.input for n in mm]
     assert nonzero_zero_points(q) == []
     zps = [i for i in q.graph.initializer if i.name.endswith("zero_point")]
     assert zps and all(onnx.numpy_helper.to_array(z).dtype == np.int8 for z in zps)
