@@ -187,7 +187,32 @@ pub fn run(a: ReplayArgs) -> Result<(), Box<dyn std::error::Error>> {
         notify: Some(tx),
         ..ReplayOptions::default()
     };
-    let (report, sinks) = milliego_hil::replay(schedules, sinks, &opts)?;
+    // Progress on stderr (drawn only on a terminal): replay time against the session's length.
+    let total_s = schedules.iter().map(|s| s.end_ns()).max().unwrap_or(0) as f64 * 1e-9;
+    let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let ticker = {
+        let done = done.clone();
+        let speed = a.speed.max(1e-6);
+        std::thread::spawn(move || {
+            let bar = indicatif::ProgressBar::new((total_s * 10.0) as u64);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("replay {bar:30} {msg}")
+                    .expect("valid template"),
+            );
+            let t0 = std::time::Instant::now();
+            while !done.load(Ordering::SeqCst) {
+                let t = (t0.elapsed().as_secs_f64() * speed).min(total_s);
+                bar.set_position((t * 10.0) as u64);
+                bar.set_message(format!("{t:.1} / {total_s:.1} s"));
+                std::thread::sleep(std::time::Duration::from_millis(200));
+            }
+            bar.finish_and_clear();
+        })
+    };
+    let result = milliego_hil::replay(schedules, sinks, &opts);
+    done.store(true, Ordering::SeqCst);
+    let _ = ticker.join();
+    let (report, sinks) = result?;
     drop(opts);
     let _ = printer.join();
     if sinks.iter().any(Sink::is_pty) {

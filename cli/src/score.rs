@@ -97,10 +97,19 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         .iter()
         .map(|(n, _)| (n.clone(), Vec::new()))
         .collect();
-    for (i, e) in entries.iter().enumerate() {
+    // Progress on stderr (drawn only on a terminal).
+    let bar = indicatif::ProgressBar::new(entries.len() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "scoring {bar:30} {pos}/{len} [{elapsed_precise} < {eta}] {msg}",
+        )
+        .expect("valid template"),
+    );
+    for e in &entries {
         let dir = work.join(set.name()).join(e.dir_name());
+        bar.set_message(e.dir_name());
         if !dir.join("session.toml").is_file() {
-            eprintln!("[{}/{}] simulating {}", i + 1, entries.len(), dir.display());
+            bar.println(format!("simulating {}", dir.display()));
             simulate(&e.scenario(), &dir, &mut |_| {})?;
         }
         let s = Session::open(&dir)?;
@@ -126,7 +135,9 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             )?;
             out.push((rep.ate.mean, rep.ate_2d.mean, rep.final_drift_pct));
         }
+        bar.inc(1);
     }
+    bar.finish_and_clear();
     let summarise = |v: &[SessionScore]| {
         let pick = |f: fn(&SessionScore) -> f64| Stats::of(&v.iter().map(f).collect::<Vec<_>>());
         (pick(|x| x.0), pick(|x| x.1), pick(|x| x.2))
