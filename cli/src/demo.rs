@@ -1,6 +1,7 @@
 //! `milliego demo`: the end-to-end job on a generated default, no hardware and no files needed:
 //! simulate a radar-inertial session, decode both UART streams with the drivers, run Doppler
-//! radar-inertial odometry and IMU dead reckoning on it, and score both against ground truth.
+//! radar-inertial odometry, the learned milliEgo model (the shipped int8 file, with tract) and IMU
+//! dead reckoning on it, and score them against ground truth.
 
 use clap::Args;
 use milliego_eval::{evaluate, Settings, Trajectory};
@@ -30,6 +31,9 @@ pub struct DemoArgs {
     /// Length in seconds.
     #[arg(long, default_value_t = 30.0)]
     duration: f64,
+    /// The learned model to run beside the classical estimators (skipped when the file is absent).
+    #[arg(long, default_value = "models/compact/model-int8.onnx")]
+    model: PathBuf,
 }
 
 pub fn run(a: DemoArgs) -> Result<()> {
@@ -96,6 +100,26 @@ pub fn run(a: DemoArgs) -> Result<()> {
             "{name:<26} {:>8.3}m {:>8.3}m {:>8.3}m {:>8.3}m {:>10.2}",
             rep.ate.rmse, rep.ate.mean, rep.ate.max, rep.ate_2d.rmse, rep.final_drift_pct
         );
+    }
+    if a.model.is_file() {
+        let name = "milliEgo compact (model)";
+        eprintln!("2/3 {name}: windows through the shared preprocessing, tract inference");
+        let mut m =
+            milliego_models::Model::load(&a.model, Some(&milliego_preprocess::Config::default()))?;
+        let r = milliego_models::offline::run_session(&mut m, &session)?;
+        let path = out.join("model.tum");
+        write_tum(&path, &r.trajectory)?;
+        let rep = evaluate(
+            &gt,
+            &Trajectory::from_tum(&r.trajectory),
+            &Settings::default(),
+        )?;
+        println!(
+            "{name:<26} {:>8.3}m {:>8.3}m {:>8.3}m {:>8.3}m {:>10.2}",
+            rep.ate.rmse, rep.ate.mean, rep.ate.max, rep.ate_2d.rmse, rep.final_drift_pct
+        );
+    } else {
+        eprintln!("skipped the learned model: {} not found", a.model.display());
     }
     println!("(ATE after SE(3) alignment over a {:.1} m path; `milliego eval --est {}/doppler.tum --gt {}/groundtruth.tum` for details)", gt.path_length(), out.display(), session_dir.display());
     Ok(())
