@@ -36,6 +36,16 @@ pub struct DemoArgs {
     model: PathBuf,
 }
 
+/// Scores `est` against `gt` and prints one table row.
+fn print_row(name: &str, gt: &Trajectory, est: &[milliego_session::TumPose]) -> Result<()> {
+    let rep = evaluate(gt, &Trajectory::from_tum(est), &Settings::default())?;
+    println!(
+        "{name:<26} {:>8.3}m {:>8.3}m {:>8.3}m {:>8.3}m {:>10.2}",
+        rep.ate.rmse, rep.ate.mean, rep.ate.max, rep.ate_2d.rmse, rep.final_drift_pct
+    );
+    Ok(())
+}
+
 pub fn run(a: DemoArgs) -> Result<()> {
     let family: Family = a
         .family
@@ -91,15 +101,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
             r.trajectory.len(),
             path.display()
         );
-        let rep = evaluate(
-            &gt,
-            &Trajectory::from_tum(&r.trajectory),
-            &Settings::default(),
-        )?;
-        println!(
-            "{name:<26} {:>8.3}m {:>8.3}m {:>8.3}m {:>8.3}m {:>10.2}",
-            rep.ate.rmse, rep.ate.mean, rep.ate.max, rep.ate_2d.rmse, rep.final_drift_pct
-        );
+        print_row(name, &gt, &r.trajectory)?;
     }
     if a.model.is_file() {
         let name = "milliEgo compact (model)";
@@ -109,15 +111,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
         let r = milliego_models::offline::run_session(&mut m, &session)?;
         let path = out.join("model.tum");
         write_tum(&path, &r.trajectory)?;
-        let rep = evaluate(
-            &gt,
-            &Trajectory::from_tum(&r.trajectory),
-            &Settings::default(),
-        )?;
-        println!(
-            "{name:<26} {:>8.3}m {:>8.3}m {:>8.3}m {:>8.3}m {:>10.2}",
-            rep.ate.rmse, rep.ate.mean, rep.ate.max, rep.ate_2d.rmse, rep.final_drift_pct
-        );
+        print_row(name, &gt, &r.trajectory)?;
     } else {
         eprintln!("skipped the learned model: {} not found", a.model.display());
     }

@@ -158,22 +158,7 @@ impl Stage {
             }
             SyncOut::Tick { t, health } => {
                 // Radar (and maybe IMU) missing: the last known pose, flagged.
-                if let Some(p) = self.predicted_pose() {
-                    let msg = self.message(
-                        &p,
-                        None,
-                        Health(self.flags(health).0 | Health::PREDICTED.0),
-                        t,
-                        true,
-                    );
-                    self.counters.predicted_poses += 1;
-                    emit(PoseOut {
-                        msg,
-                        t,
-                        read_ns: now_ns,
-                        emitted_ns: now_ns,
-                    });
-                }
+                self.emit_predicted(health, t, true, now_ns, now_ns, &mut emit);
             }
         }
     }
@@ -215,22 +200,7 @@ impl Stage {
         if radar_missing {
             self.last_radar_rate_t = s.t;
         }
-        if let Some(p) = self.predicted_pose() {
-            let msg = self.message(
-                &p,
-                None,
-                Health(self.flags(health).0 | Health::PREDICTED.0),
-                s.t,
-                radar_missing,
-            );
-            self.counters.predicted_poses += 1;
-            emit(PoseOut {
-                msg,
-                t: s.t,
-                read_ns,
-                emitted_ns: now_ns,
-            });
-        }
+        self.emit_predicted(health, s.t, radar_missing, read_ns, now_ns, emit);
     }
 
     /// An IMU sample as it arrived (before the estimator sees it in order): propagate the
@@ -257,18 +227,32 @@ impl Stage {
         };
         sd.push(sample);
         let radar_missing = health.contains(Health::RADAR_MISSING);
+        self.emit_predicted(health, s.t, radar_missing, read_ns, now_ns, emit);
+    }
+
+    /// Publishes the IMU-propagated pose at `t` \[s\], flagged PREDICTED (nothing before the
+    /// first radar-rate pose).
+    fn emit_predicted(
+        &mut self,
+        health: Health,
+        t: f64,
+        radar_missing: bool,
+        read_ns: u64,
+        now_ns: u64,
+        emit: &mut impl FnMut(PoseOut),
+    ) {
         if let Some(p) = self.predicted_pose() {
             let msg = self.message(
                 &p,
                 None,
                 Health(self.flags(health).0 | Health::PREDICTED.0),
-                s.t,
+                t,
                 radar_missing,
             );
             self.counters.predicted_poses += 1;
             emit(PoseOut {
                 msg,
-                t: s.t,
+                t,
                 read_ns,
                 emitted_ns: now_ns,
             });
