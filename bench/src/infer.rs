@@ -107,7 +107,10 @@ pub fn load_state(path: &Path, threads: usize) -> Result<(TypedSimpleState, usiz
             .set_input_fact(i, f32::fact(s.as_slice()).into())
             .map_err(e)?;
     }
-    let typed = model.into_optimized().map_err(e)?;
+    let mut typed = model.into_optimized().map_err(e)?;
+    if milliego_accel::enabled() {
+        milliego_accel::accelerate(&mut typed).map_err(e)?;
+    }
     let plan = plan_with_threads(typed, threads)?;
     Ok((TypedSimpleState::new(&plan).map_err(e)?, h))
 }
@@ -495,13 +498,15 @@ pub fn profile(
         let e = by_op.entry(op.clone()).or_default();
         e.0 += ms / n;
         e.1 += 1;
-        nodes.push((format!("{} ({op})", node.name), ms / n));
+        // The op's own description names the kernel it runs (e.g. the matmul kernel).
+        let info = node.op().info().unwrap_or_default().join("; ");
+        nodes.push((format!("{} ({op}) {info}", node.name), ms / n));
     }
     let mut ops: Vec<(String, f64, usize)> =
         by_op.into_iter().map(|(k, (t, c))| (k, t, c)).collect();
     ops.sort_by(|a, b| b.1.total_cmp(&a.1));
     nodes.sort_by(|a, b| b.1.total_cmp(&a.1));
-    nodes.truncate(15);
+    nodes.truncate(60);
     Ok(Profile {
         ops,
         nodes,

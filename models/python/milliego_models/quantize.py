@@ -1,15 +1,17 @@
 """Static int8 quantization in the form tract runs fastest.
 
     python -m milliego_models.quantize --model model.onnx --data DATASET_DIR --out model-int8.onnx \
-        [--calib-windows 256] [--per-channel] [--ops conv|conv+matmul]
+        [--calib-windows 256] [--per-channel] [--ops auto|conv|conv+matmul] [--min-matmul-weights N]
 
 Recipe (see shared/reference/milliego-model.md, tract findings): onnxruntime `quantize_static`,
 QOperator format, s8 activations and weights, both symmetric (zero point 0, so tract folds the int8
-weights once), only standard QLinearConv (and with `--ops conv+matmul` QLinearMatMul) plus
-QuantizeLinear / DequantizeLinear around them; every other op stays fp32. Default `--ops conv`: on the
-simulator's held-out test set the compact model's int8 ATE is 1.71 m against 1.70 m fp32 with convs
-only, 2.22-2.33 m with the MatMuls (LSTMs, attention, heads) quantized as well; the convolutions are
-nearly all of the work. No com.microsoft ops. Calibration (MinMax) runs
+weights once), only standard QLinearConv and QLinearMatMul plus
+QuantizeLinear / DequantizeLinear around them; every other op stays fp32. Default `--ops auto`: the
+convolutions, and the MatMuls whose weight matrix has at least 2^20 elements (the paper graph's fusion
+LSTM matrices, memory-bound matrix-vector products; no compact-model MatMul is that large, so for the
+compact model `auto` is `conv`). On the simulator's held-out test set the compact model's int8 ATE is
+1.71 m against 1.70 m fp32 with convs only, 2.22-2.33 m with every MatMul (LSTMs, attention, heads)
+quantized as well (`--ops conv+matmul`). Timings per recipe: docs/int8-speed.md. No com.microsoft ops. Calibration (MinMax) runs
 on real dataset windows; for a stateful model the `state` input of each calibration window is the state
 the fp32 model reaches when run along that window's chain from its start.
 Per-tensor weight scales by default (the recipe measured in tract); `--per-channel` gives per-output-
@@ -26,7 +28,12 @@ import onnx
 from .data import expand_panorama, stack_pair
 from .onnx_utils import get_metadata, nonzero_zero_points, op_problems, ort_session, set_metadata
 
-MAX_CHAIN_RUN = 200  # stateful calibration: windows are picked within the first N of each chain
+MAX_CHAIN_RUN = 200
+# `--ops auto` quantizes a MatMul only when its weight matrix has at least this many elements: the
+# large matrix-vector products are memory-bound and int8 moves a quarter of the bytes, while small
+# ones run faster in fp32 in tract (no quantize/dequantize around them, no int8 tile set-up) and
+# keep the LSTMs' accuracy. 2^20: the paper graph's fusion LSTM matrices; none of the compact ones.
+MIN_MATMUL_WEIGHTS = 1 << 20
 
 
 def calibration_feeds(fp32_path: str, data, n: int, stateful: bool, hidden: int) -> list[dict]:
@@ -65,9 +72,16 @@ def random_feeds(n: int, hidden: int, seed: int = 0) -> list[dict]:
     return feeds
 
 
+def small_matmuls(model: onnx.ModelProto, min_weights: int) -> list[str]:
+    """MatMuls whose constant weight has fewer than `min_weights` elements (kept fp32 by `auto`)."""
+    sizes = {i.name: int(np.prod(i.dims)) for i in model.graph.initializer}
+    return [n.name for n in model.graph.node if n.op_type == "MatMul"
+            and max((sizes.get(i, 0) for i in n.input), default=0) < min_weights]
+
+
 def quantize_model(fp32_path: str, out_path: str, feeds: list[dict], per_channel: bool = False,
-                   ops: str = "conv",
-                   calibration: str = "dataset") -> float:
+                   ops: str = "auto", calibration: str = "dataset",
+                   min_matmul_weights: int = MIN_MATMUL_WEIGHTS) -> float:
     """Quantize, check the graph, copy metadata; returns max |int8 - fp32| pose diff over `feeds[:16]`."""
     from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
 
@@ -85,10 +99,12 @@ def quantize_model(fp32_path: str, out_path: str, feeds: list[dict], per_channel
     fp32_model = onnx.load(fp32_path)
     exclude = [n.name for n in fp32_model.graph.node
                if n.op_type in ("MatMul", "Conv") and "imu" in n.input]
+    if ops == "auto":
+        exclude += small_matmuls(fp32_model, min_matmul_weights)
     quantize_static(fp32_path, out_path, Reader(), quant_format=QuantFormat.QOperator,
                     nodes_to_exclude=exclude,
                     activation_type=QuantType.QInt8, weight_type=QuantType.QInt8,
-                    op_types_to_quantize=["Conv", "MatMul"] if ops == "conv+matmul" else ["Conv"],
+                    op_types_to_quantize=["Conv"] if ops == "conv" else ["Conv", "MatMul"],
                     per_channel=per_channel,
                     extra_options={"ActivationSymmetric": True, "WeightSymmetric": True})
     model = onnx.load(out_path)
@@ -97,7 +113,8 @@ def quantize_model(fp32_path: str, out_path: str, feeds: list[dict], per_channel
         raise RuntimeError(f"int8 graph breaks the tract recipe: {problems[:10]}")
     meta = get_metadata(onnx.load(fp32_path))
     meta.update(precision="int8", quantization={
-        "recipe": "onnxruntime quantize_static QOperator, s8 symmetric activations+weights, Conv+MatMul",
+        "recipe": "onnxruntime quantize_static QOperator, s8 symmetric activations+weights",
+        "ops": ops, "min_matmul_weights": min_matmul_weights if ops == "auto" else None,
         "per_channel": per_channel, "calibration": calibration, "calib_windows": len(feeds)})
     set_metadata(model, meta)
     onnx.save(model, out_path)
@@ -112,9 +129,13 @@ def main(argv=None) -> int:
     p.add_argument("--out", required=True)
     p.add_argument("--calib-windows", type=int, default=256)
     p.add_argument("--per-channel", action="store_true")
-    p.add_argument("--ops", choices=["conv", "conv+matmul"], default="conv",
-                   help="operator types to quantize (default conv: the dense layers and LSTMs stay fp32; "
-                        "conv+matmul cost the compact model 31%% held-out ATE, see models/python/README.md)")
+    p.add_argument("--ops", choices=["auto", "conv", "conv+matmul"], default="auto",
+                   help="operator types to quantize (default auto: convolutions, and MatMuls whose weight "
+                        "has at least --min-matmul-weights elements; conv: convolutions only; "
+                        "conv+matmul: every MatMul too, which cost the compact model 31%% held-out ATE, "
+                        "see models/python/README.md)")
+    p.add_argument("--min-matmul-weights", type=int, default=MIN_MATMUL_WEIGHTS,
+                   help="with --ops auto: smallest weight matrix (elements) quantized (default 2^20)")
     a = p.parse_args(argv)
     from .data import load_any
     meta = get_metadata(onnx.load(a.model))
@@ -122,7 +143,8 @@ def main(argv=None) -> int:
     if meta.get("norm"):
         data.norm = meta["norm"]  # calibrate on what the runtime will feed: the model's normalisation
     feeds = calibration_feeds(a.model, data, a.calib_windows, meta["stateful"], meta["hidden"])
-    diff = quantize_model(a.model, a.out, feeds, a.per_channel, a.ops)
+    diff = quantize_model(a.model, a.out, feeds, a.per_channel, a.ops,
+                          min_matmul_weights=a.min_matmul_weights)
     print(f"wrote {a.out}: int8 (QLinearConv/QLinearMatMul, symmetric s8), calibrated on {len(feeds)} windows "
           f"of {a.data}; int8 vs fp32 pose max abs diff {diff:.3g}")
     return 0
