@@ -98,7 +98,12 @@ pub struct PackedIm2Col {
     dt: DatumType,
     /// Every output row cut at panel boundaries, in output order.
     runs: Vec<Run>,
+    /// [`PackedIm2Col::tap`] of every patch row, k rounded up to 4 with [`NO_TAP`].
+    taps: Vec<usize>,
 }
+
+/// A patch row past k (K=4 padding): zeros.
+const NO_TAP: usize = usize::MAX;
 
 impl PackedIm2Col {
     /// The replacement for `op` (an `Im2col` node whose input fact is `input` and whose output
@@ -150,19 +155,22 @@ impl PackedIm2Col {
             .and_then(|f| f.downcast_ref::<PackedExoticFact>())
             .ok_or("output is not a packed matrix")?;
         if pof.k != k || pof.mn.as_i64() != Some(n as i64) {
-            return Err(format!("packed fact k={} mn={} against k={k} n={n}", pof.k, pof.mn));
+            return Err(format!(
+                "packed fact k={} mn={} against k={k} n={n}",
+                pof.k, pof.mn
+            ));
         }
-        let (layout, r, panel_len, align) =
-            if let Some(f) = pof.format.downcast_ref::<PackedI8K4>() {
-                (Layout::K4, f.r, f.single_panel_len(k), f.alignment())
-            } else if let Some(f) = pof.format.downcast_ref::<PackedFormat>() {
-                if f.dt.size_of() != 1 {
-                    return Err(format!("packing for {:?}", f.dt));
-                }
-                (Layout::KMajor, f.r, f.single_panel_len(k), f.alignment())
-            } else {
-                return Err(format!("packing {} is not handled", pof.format));
-            };
+        let (layout, r, panel_len, align) = if let Some(f) = pof.format.downcast_ref::<PackedI8K4>()
+        {
+            (Layout::K4, f.r, f.single_panel_len(k), f.alignment())
+        } else if let Some(f) = pof.format.downcast_ref::<PackedFormat>() {
+            if f.dt.size_of() != 1 {
+                return Err(format!("packing for {:?}", f.dt));
+            }
+            (Layout::KMajor, f.r, f.single_panel_len(k), f.alignment())
+        } else {
+            return Err(format!("packing {} is not handled", pof.format));
+        };
         if r == 0 || panel_len < r * k {
             return Err(format!("panel of {panel_len} bytes for r={r} k={k}"));
         }
@@ -196,11 +204,16 @@ impl PackedIm2Col {
                 let n = yo * wo + xo;
                 let (p, item) = (n / r, n % r);
                 let len = (r - item).min(wo - xo);
-                runs.push(Run { panel: p * panel_len, item, src: yo * row_step + xo, len });
+                runs.push(Run {
+                    panel: p * panel_len,
+                    item,
+                    src: yo * row_step + xo,
+                    len,
+                });
                 xo += len;
             }
         }
-        Ok(PackedIm2Col {
+        let mut op = PackedIm2Col {
             geo,
             layout,
             r,
@@ -209,7 +222,12 @@ impl PackedIm2Col {
             format: pof.format.clone(),
             dt,
             runs,
-        })
+            taps: vec![],
+        };
+        op.taps = (0..k.div_ceil(4) * 4)
+            .map(|kk| if kk < k { op.tap(kk) } else { NO_TAP })
+            .collect();
+        Ok(op)
     }
 
     /// Pads one group's channels into `pin` (`[cpg][hp][sx phases][wq]`, pad bytes around)
@@ -224,17 +242,28 @@ impl PackedIm2Col {
                 } else if g.sx == 2 {
                     // Even and odd columns: one de-interleaving pass over the row.
                     let (ph0, ph1) = pin[base..base + 2 * g.wq].split_at_mut(g.wq);
-                    let (first, second) = if g.pl % 2 == 0 { (ph0, ph1) } else { (ph1, ph0) };
-                    let (j0, j1) = (g.pl / 2, (g.pl + 1) / 2);
-                    let pairs = row.chunks_exact(2);
-                    if let &[last] = pairs.remainder() {
-                        first[j0 + g.w / 2] = last;
+                    let (first, second) = if g.pl.is_multiple_of(2) {
+                        (ph0, ph1)
+                    } else {
+                        (ph1, ph0)
+                    };
+                    let (j0, j1) = (g.pl / 2, g.pl.div_ceil(2));
+                    let (first, second) = (&mut first[j0..], &mut second[j1..]);
+                    let blocks = row.chunks_exact(32);
+                    let done = row.len() - blocks.remainder().len();
+                    for (i, block) in blocks.enumerate() {
+                        if let Ok(block) = <&[u8; 32]>::try_from(block) {
+                            let (even, odd) = deinterleave32(block);
+                            first[16 * i..16 * i + 16].copy_from_slice(&even);
+                            second[16 * i..16 * i + 16].copy_from_slice(&odd);
+                        }
                     }
-                    for ((f, s), pair) in
-                        first[j0..].iter_mut().zip(second[j1..].iter_mut()).zip(pairs)
-                    {
-                        *f = pair[0];
-                        *s = pair[1];
+                    for (x, &v) in row.iter().enumerate().skip(done) {
+                        if x % 2 == 0 {
+                            first[x / 2] = v;
+                        } else {
+                            second[x / 2] = v;
+                        }
                     }
                 } else {
                     // Phase `ph` holds padded columns ph, ph + sx, ...: a strided gather per phase.
@@ -266,27 +295,33 @@ impl PackedIm2Col {
     /// One group of one batch item: the packed panels (`out` arrives zeroed, which is the
     /// padding past k and n).
     fn pack(&self, pin: &[u8], zeros: &[u8], out: &mut [u8]) {
-        let g = &self.geo;
         let r = self.r;
+        // Run-major: every run fills its panel's rows in order, so the writes stream through
+        // one panel at a time while the taps are read from the (cache-resident) padded input.
         match self.layout {
             Layout::K4 => {
-                for kb in 0..g.k.div_ceil(4) {
-                    let taps = [0, 1, 2, 3].map(|j| (kb * 4 + j < g.k).then(|| self.tap(kb * 4 + j)));
-                    for run in &self.runs {
+                for run in &self.runs {
+                    let dst = &mut out[run.panel..run.panel + self.panel_len];
+                    for (kb, taps) in self.taps.chunks_exact(4).enumerate() {
                         let src = |j: usize| match taps[j] {
-                            Some(t) => &pin[t + run.src..][..run.len],
-                            None => &zeros[..run.len],
+                            NO_TAP => &zeros[..run.len],
+                            t => &pin[t + run.src..][..run.len],
                         };
-                        let dst = &mut out[run.panel + kb * 4 * r + 4 * run.item..][..4 * run.len];
-                        interleave4(dst, src(0), src(1), src(2), src(3));
+                        interleave4(
+                            &mut dst[kb * 4 * r + 4 * run.item..][..4 * run.len],
+                            src(0),
+                            src(1),
+                            src(2),
+                            src(3),
+                        );
                     }
                 }
             }
             Layout::KMajor => {
-                for kk in 0..g.k {
-                    let t = self.tap(kk);
-                    for run in &self.runs {
-                        out[run.panel + kk * r + run.item..][..run.len]
+                for run in &self.runs {
+                    let dst = &mut out[run.panel..run.panel + self.panel_len];
+                    for (kk, &t) in self.taps.iter().take(self.geo.k).enumerate() {
+                        dst[kk * r + run.item..][..run.len]
                             .copy_from_slice(&pin[t + run.src..][..run.len]);
                     }
                 }
@@ -311,8 +346,11 @@ impl PackedIm2Col {
             for grp in 0..g.group {
                 let src = &x[(b * g.c + grp * g.cpg) * plane..][..g.cpg * plane];
                 self.split(src, &mut pin);
-                let mut packed =
-                    Tensor::zero_aligned_dt(u8::datum_type(), &[panels * self.panel_len], self.align.max(CACHE_LINE))?;
+                let mut packed = Tensor::zero_aligned_dt(
+                    u8::datum_type(),
+                    &[panels * self.panel_len],
+                    self.align.max(CACHE_LINE),
+                )?;
                 self.pack(&pin, &zeros, packed.as_bytes_mut());
                 values.push(Box::new(EagerPackedInput {
                     fact: PackedExoticFact {
@@ -330,8 +368,8 @@ impl PackedIm2Col {
     }
 }
 
-/// `dst[4i..4i+4] = [a[i], b[i], c[i], d[i]]`. Runs of 16 (a whole 16-wide panel row, the
-/// common case) go through [`interleave16`].
+/// `dst[4i..4i+4] = [a[i], b[i], c[i], d[i]]`: 16 items at a time through [`interleave16`], then
+/// 8 through [`interleave8`] (the 8-wide panels), then one by one.
 fn interleave4(dst: &mut [u8], a: &[u8], b: &[u8], c: &[u8], d: &[u8]) {
     if let (Ok(o), Ok(a), Ok(b), Ok(c), Ok(d)) = (
         <&mut [u8; 64]>::try_from(&mut *dst),
@@ -343,9 +381,99 @@ fn interleave4(dst: &mut [u8], a: &[u8], b: &[u8], c: &[u8], d: &[u8]) {
         interleave16(o, a, b, c, d);
         return;
     }
-    for ((((o, &a), &b), &c), &d) in dst.chunks_exact_mut(4).zip(a).zip(b).zip(c).zip(d) {
-        o.copy_from_slice(&[a, b, c, d]);
+    let mut i = 0;
+    while i + 16 <= a.len() {
+        if let (Ok(o), Ok(a), Ok(b), Ok(c), Ok(d)) = (
+            <&mut [u8; 64]>::try_from(&mut dst[4 * i..4 * i + 64]),
+            <&[u8; 16]>::try_from(&a[i..i + 16]),
+            <&[u8; 16]>::try_from(&b[i..i + 16]),
+            <&[u8; 16]>::try_from(&c[i..i + 16]),
+            <&[u8; 16]>::try_from(&d[i..i + 16]),
+        ) {
+            interleave16(o, a, b, c, d);
+        }
+        i += 16;
     }
+    if i + 8 <= a.len() {
+        if let (Ok(o), Ok(a), Ok(b), Ok(c), Ok(d)) = (
+            <&mut [u8; 32]>::try_from(&mut dst[4 * i..4 * i + 32]),
+            <&[u8; 8]>::try_from(&a[i..i + 8]),
+            <&[u8; 8]>::try_from(&b[i..i + 8]),
+            <&[u8; 8]>::try_from(&c[i..i + 8]),
+            <&[u8; 8]>::try_from(&d[i..i + 8]),
+        ) {
+            interleave8(o, a, b, c, d);
+        }
+        i += 8;
+    }
+    for (j, o) in dst[4 * i..].chunks_exact_mut(4).enumerate() {
+        o.copy_from_slice(&[a[i + j], b[i + j], c[i + j], d[i + j]]);
+    }
+}
+
+/// 4 x 8 bytes to 8 x 4: the 16-byte interleave on zero-extended halves, first half kept.
+fn interleave8(o: &mut [u8; 32], a: &[u8; 8], b: &[u8; 8], c: &[u8; 8], d: &[u8; 8]) {
+    let wide = |x: &[u8; 8]| {
+        let mut w = [0u8; 16];
+        w[..8].copy_from_slice(x);
+        w
+    };
+    let mut full = [0u8; 64];
+    interleave16(&mut full, &wide(a), &wide(b), &wide(c), &wide(d));
+    o.copy_from_slice(&full[..32]);
+}
+
+/// 32 bytes to their 16 even-indexed and 16 odd-indexed ones.
+#[cfg(target_arch = "x86_64")]
+fn deinterleave32(x: &[u8; 32]) -> ([u8; 16], [u8; 16]) {
+    // SAFETY: as for `interleave16`: SSE2 is baseline on x86_64, no pointers are involved.
+    #[allow(unsafe_code)]
+    unsafe {
+        deinterleave32_sse2(x)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "sse2")]
+fn deinterleave32_sse2(x: &[u8; 32]) -> ([u8; 16], [u8; 16]) {
+    use std::arch::x86_64::*;
+    let [lo, hi]: [__m128i; 2] = bytemuck::cast(*x);
+    let mask = _mm_set1_epi16(0x00ff);
+    let even = _mm_packus_epi16(_mm_and_si128(lo, mask), _mm_and_si128(hi, mask));
+    let odd = _mm_packus_epi16(_mm_srli_epi16(lo, 8), _mm_srli_epi16(hi, 8));
+    (bytemuck::cast(even), bytemuck::cast(odd))
+}
+
+/// 32 bytes to their 16 even-indexed and 16 odd-indexed ones.
+#[cfg(target_arch = "aarch64")]
+fn deinterleave32(x: &[u8; 32]) -> ([u8; 16], [u8; 16]) {
+    // SAFETY: as for `interleave16`: NEON is baseline on aarch64, no pointers are involved.
+    #[allow(unsafe_code)]
+    unsafe {
+        deinterleave32_neon(x)
+    }
+}
+
+#[cfg(target_arch = "aarch64")]
+#[target_feature(enable = "neon")]
+fn deinterleave32_neon(x: &[u8; 32]) -> ([u8; 16], [u8; 16]) {
+    use std::arch::aarch64::*;
+    let [lo, hi]: [uint8x16_t; 2] = bytemuck::cast(*x);
+    (
+        bytemuck::cast(vuzp1q_u8(lo, hi)),
+        bytemuck::cast(vuzp2q_u8(lo, hi)),
+    )
+}
+
+/// 32 bytes to their 16 even-indexed and 16 odd-indexed ones, portable.
+#[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+fn deinterleave32(x: &[u8; 32]) -> ([u8; 16], [u8; 16]) {
+    let (mut even, mut odd) = ([0u8; 16], [0u8; 16]);
+    for i in 0..16 {
+        even[i] = x[2 * i];
+        odd[i] = x[2 * i + 1];
+    }
+    (even, odd)
 }
 
 /// 4 x 16 bytes to 16 x 4: eight byte/word unpacks (SSE2, baseline on x86_64).
@@ -433,7 +561,11 @@ impl Op for PackedIm2Col {
 
 impl EvalOp for PackedIm2Col {
     fn eval_out_of_plan(&self, inputs: TVec<TValue>) -> TractResult<Option<TVec<TValue>>> {
-        Ok(Some(EvalOp::eval(self, &EvalContext::out_of_plan(), inputs)?))
+        Ok(Some(EvalOp::eval(
+            self,
+            &EvalContext::out_of_plan(),
+            inputs,
+        )?))
     }
 
     fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
@@ -445,7 +577,11 @@ impl EvalOp for PackedIm2Col {
         // The padding value is the input's zero point (a scalar, possibly held as i32).
         let pad = match inputs.get(1) {
             Some(p) => {
-                ensure!(p.len() == 1, "PackedIm2col: padding value of shape {:?}", p.shape());
+                ensure!(
+                    p.len() == 1,
+                    "PackedIm2col: padding value of shape {:?}",
+                    p.shape()
+                );
                 let v = p.cast_to_scalar::<i32>()?;
                 let byte = if self.dt.unquantized() == DatumType::U8 {
                     u8::try_from(v).ok()
@@ -462,7 +598,9 @@ impl EvalOp for PackedIm2Col {
             inputs[0].datum_type(),
             self.dt
         );
-        Ok(tvec!(self.eval_bytes(inputs[0].as_bytes(), pad)?.into_tvalue()))
+        Ok(tvec!(self
+            .eval_bytes(inputs[0].as_bytes(), pad)?
+            .into_tvalue()))
     }
 }
 
@@ -477,7 +615,14 @@ impl TypedOp for PackedIm2Col {
 
     fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
         let g = &self.geo;
-        let pof = PackedExoticFact { format: self.format.clone(), k: g.k, mn: g.n.to_dim() };
-        Ok(tvec!(inputs[0].datum_type.fact([g.batch, g.group]).with_exotic_fact(pof)))
+        let pof = PackedExoticFact {
+            format: self.format.clone(),
+            k: g.k,
+            mn: g.n.to_dim(),
+        };
+        Ok(tvec!(inputs[0]
+            .datum_type
+            .fact([g.batch, g.group])
+            .with_exotic_fact(pof)))
     }
 }

@@ -65,7 +65,10 @@ impl std::fmt::Display for Report {
 /// Whether the passes run: on unless `MILLIEGO_ACCEL` is `0`, `off` or `false`.
 pub fn enabled() -> bool {
     !matches!(
-        std::env::var("MILLIEGO_ACCEL").ok().as_deref().map(str::trim),
+        std::env::var("MILLIEGO_ACCEL")
+            .ok()
+            .as_deref()
+            .map(str::trim),
         Some("0" | "off" | "false")
     )
 }
@@ -83,7 +86,9 @@ pub fn accelerate(model: &mut TypedModel) -> TractResult<Report> {
             }
             continue;
         }
-        let Some(op) = node.op_as::<Im2Col>() else { continue };
+        let Some(op) = node.op_as::<Im2Col>() else {
+            continue;
+        };
         let input = model.outlet_fact(node.inputs[0])?;
         let output = &node.outputs[0].fact;
         match PackedIm2Col::from_tract(op, input, output) {

@@ -42,6 +42,8 @@ pub fn quantize_i8(x: &[f32], y: &mut [i8], scale: f32, zero_point: i8) {
     let zp = i32::from(zero_point);
     for (x, y) in x.iter().zip(y) {
         // Clamping to +-256 first changes nothing after the final clamp to i8 (|zp| <= 128).
+        // max/min rather than clamp: they turn NaN into -256, clamp would keep it.
+        #[allow(clippy::manual_clamp)]
         let t = (x * scale).max(-256.0).min(256.0);
         let i = (t + ROUNDER).to_bits() as i32 - ROUNDER_BITS;
         *y = (i + zp).clamp(-128, 127) as i8;
@@ -52,8 +54,12 @@ impl FastQuantizeI8 {
     /// The replacement for a tract `QuantizeLinearI8` node reading f32 and writing plain i8.
     pub fn from_tract(op: &ElementWiseOp, input: &TypedFact, output: &TypedFact) -> Option<Self> {
         let q = op.0.downcast_ref::<QuantizeLinearI8>()?;
-        (input.datum_type == f32::datum_type() && output.datum_type == i8::datum_type())
-            .then_some(FastQuantizeI8 { scale: q.scale, zero_point: q.zero_point })
+        (input.datum_type == f32::datum_type() && output.datum_type == i8::datum_type()).then_some(
+            FastQuantizeI8 {
+                scale: q.scale,
+                zero_point: q.zero_point,
+            },
+        )
     }
 }
 
@@ -63,7 +69,10 @@ impl Op for FastQuantizeI8 {
     }
 
     fn info(&self) -> TractResult<Vec<String>> {
-        Ok(vec![format!("scale: {} zero_point: {}", self.scale, self.zero_point)])
+        Ok(vec![format!(
+            "scale: {} zero_point: {}",
+            self.scale, self.zero_point
+        )])
     }
 
     fn as_typed(&self) -> Option<&dyn TypedOp> {
@@ -73,16 +82,26 @@ impl Op for FastQuantizeI8 {
 
 impl EvalOp for FastQuantizeI8 {
     fn eval_out_of_plan(&self, inputs: TVec<TValue>) -> TractResult<Option<TVec<TValue>>> {
-        Ok(Some(EvalOp::eval(self, &EvalContext::out_of_plan(), inputs)?))
+        Ok(Some(EvalOp::eval(
+            self,
+            &EvalContext::out_of_plan(),
+            inputs,
+        )?))
     }
 
     fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
         ensure!(inputs.len() == 1, "FastQuantizeI8: {} inputs", inputs.len());
-        let xv = inputs[0].as_plain_ram().context("FastQuantizeI8: input not in memory")?;
+        let xv = inputs[0]
+            .as_plain_ram()
+            .context("FastQuantizeI8: input not in memory")?;
         let mut y = Tensor::zero::<i8>(inputs[0].shape())?;
-        let mut yv = y.as_plain_ram_mut().context("FastQuantizeI8: output not in memory")?;
-        quantize_i8(xv.as_slice::<f32>()?, yv.as_slice_mut::<i8>()?, self.scale, self.zero_point);
-        drop(yv);
+        {
+            let mut yv = y
+                .as_plain_ram_mut()
+                .context("FastQuantizeI8: output not in memory")?;
+            let ys = yv.as_slice_mut::<i8>()?;
+            quantize_i8(xv.as_slice::<f32>()?, ys, self.scale, self.zero_point);
+        }
         Ok(tvec!(y.into_tvalue()))
     }
 }

@@ -177,16 +177,19 @@ pub fn tract_time(
 }
 
 /// Times `path` in tract in a child process (`milliego-bench --tract-one`), so its peak RSS
-/// delta does not overlap with other graphs.
+/// delta does not overlap with other graphs; `accel` false times tract's stock plan
+/// (`MILLIEGO_ACCEL=0`: without `milliego-accel`'s passes).
 pub fn tract_time_child(
     path: &Path,
     bundle: &Path,
     runs: usize,
     warmup: usize,
     threads: usize,
+    accel: bool,
 ) -> Result<Timing, String> {
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
     let out = Command::new(exe)
+        .env("MILLIEGO_ACCEL", if accel { "1" } else { "0" })
         .arg("--tract-one")
         .arg(path)
         .arg("--inputs")
@@ -315,6 +318,7 @@ pub fn rows(
     group: &str,
     tract_fp32: Result<Timing, String>,
     tract_int8: Result<Timing, String>,
+    tract_int8_stock: Result<Timing, String>,
     ort: Result<OrtResult, String>,
     note: &str,
 ) -> Vec<Row> {
@@ -407,6 +411,16 @@ pub fn rows(
         ),
         Row::new(
             group,
+            "tract int8, accel passes",
+            ms(&tract_int8, false),
+            "ms",
+            "stock tract plan",
+            ms(&tract_int8_stock, false),
+            l,
+            "milliego-accel (packed im2col, quantize); same values",
+        ),
+        Row::new(
+            group,
             "ORT on tract's int8 file",
             o.map(|o| o.tract_int8_file.median_ms),
             "ms",
@@ -455,7 +469,7 @@ pub fn rows(
 pub struct Profile {
     /// (op type, ms per call summed over its nodes, node count), slowest first.
     pub ops: Vec<(String, f64, usize)>,
-    /// (node name and op type, ms per call), the 15 slowest.
+    /// (node name, op type and its description, ms per call), the 20 slowest.
     pub nodes: Vec<(String, f64)>,
     /// Median of the whole call \[ms\] (per-node timing included).
     pub median_ms: f64,
@@ -506,7 +520,7 @@ pub fn profile(
         by_op.into_iter().map(|(k, (t, c))| (k, t, c)).collect();
     ops.sort_by(|a, b| b.1.total_cmp(&a.1));
     nodes.sort_by(|a, b| b.1.total_cmp(&a.1));
-    nodes.truncate(60);
+    nodes.truncate(20);
     Ok(Profile {
         ops,
         nodes,

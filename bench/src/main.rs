@@ -180,10 +180,12 @@ fn main() -> ExitCode {
                 continue;
             }
         };
-        let t32 = infer::tract_time_child(&fp32, &bundle, runs, warmup, 1);
-        let t8 = infer::tract_time_child(&int8, &bundle, runs, warmup, 1);
+        let t32 = infer::tract_time_child(&fp32, &bundle, runs, warmup, 1, true);
+        let t8 = infer::tract_time_child(&int8, &bundle, runs, warmup, 1, true);
+        // The same int8 plan without milliego-accel's passes: what they buy, in the same run.
+        let t8_stock = infer::tract_time_child(&int8, &bundle, runs, warmup, 1, false);
         let ort = infer::ort_time(&root, &fp32, &int8, &bundle, runs, warmup);
-        rows.extend(infer::rows(&group, t32, t8, ort, &note));
+        rows.extend(infer::rows(&group, t32, t8, t8_stock, ort, &note));
     }
     rows.extend(e2e::rows(&milliego_binary(&root), a.e2e.as_deref()));
 

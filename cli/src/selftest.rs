@@ -354,7 +354,8 @@ fn model_checks(dir: &std::path::Path, checks: &mut Map<String, Value>) -> Resul
         all_ok &= ok;
         checks.insert(
             format!("model_{key}"),
-            json!({"outputs": outputs, "tolerance": tol, "max_abs_diff_to_onnxruntime": worst, "ok": ok}),
+            json!({"outputs": outputs, "tolerance": tol, "max_abs_diff_to_onnxruntime": worst, "ok": ok,
+                   "accel": m.accel().map(|r| r.to_string())}),
         );
     }
     Ok(all_ok)

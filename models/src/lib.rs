@@ -111,6 +111,7 @@ pub struct Model {
     zero_state: Tensor,
     radar: Box<[f32; RADAR_LEN]>,
     steps: u64,
+    accel: Option<milliego_accel::Report>,
 }
 
 /// The values of an f32 tensor, in order.
@@ -208,9 +209,16 @@ impl Model {
             path: path.into(),
             why: format!("{e:#}"),
         };
-        let typed = model
+        let mut typed = model
             .into_optimized()
             .map_err(|e| iface(format!("{e:#}")))?;
+        // Faster ops with identical values (packed int8 im2col, vectorised quantize); off with
+        // MILLIEGO_ACCEL=0.
+        let accel = if milliego_accel::enabled() {
+            Some(milliego_accel::accelerate(&mut typed).map_err(|e| iface(format!("{e:#}")))?)
+        } else {
+            None
+        };
         let out_shapes: Vec<Vec<usize>> = typed
             .output_outlets()
             .map_err(run_err)?
@@ -239,7 +247,14 @@ impl Model {
             exec,
             radar: Box::new([0.0; RADAR_LEN]),
             steps: 0,
+            accel,
         })
+    }
+
+    /// What the plan passes of `milliego-accel` changed, or `None` when they were turned off
+    /// (`MILLIEGO_ACCEL=0`).
+    pub fn accel(&self) -> Option<&milliego_accel::Report> {
+        self.accel.as_ref()
     }
 
     /// The model's metadata.
