@@ -11,7 +11,10 @@ convolutions, and the MatMuls whose weight matrix has at least 2^20 elements (th
 LSTM matrices, memory-bound matrix-vector products; no compact-model MatMul is that large, so for the
 compact model `auto` is `conv`). On the simulator's held-out test set the compact model's int8 ATE is
 1.71 m against 1.70 m fp32 with convs only, 2.22-2.33 m with every MatMul (LSTMs, attention, heads)
-quantized as well (`--ops conv+matmul`). Timings per recipe: docs/int8-speed.md. No com.microsoft ops. Calibration (MinMax) runs
+quantized as well (`--ops conv+matmul`). Convolutions with fewer than 16 output channels are widened
+with zero filters first (`pad_narrow_convs`: same values, but tract then runs them on its 16-row int8
+tile; the compact model's first convolution, 8 channels, ran 3x slower on the 8-row one). Timings per
+recipe: docs/int8-speed.md. No com.microsoft ops. Calibration (MinMax) runs
 on real dataset windows; for a stateful model the `state` input of each calibration window is the state
 the fp32 model reaches when run along that window's chain from its start.
 Per-tensor weight scales by default (the recipe measured in tract); `--per-channel` gives per-output-
@@ -34,6 +37,9 @@ MAX_CHAIN_RUN = 200
 # ones run faster in fp32 in tract (no quantize/dequantize around them, no int8 tile set-up) and
 # keep the LSTMs' accuracy. 2^20: the paper graph's fusion LSTM matrices; none of the compact ones.
 MIN_MATMUL_WEIGHTS = 1 << 20
+# Convolutions narrower than this many output channels are widened with zero filters before
+# quantizing (`pad_narrow_convs`): tract's int8 kernels tile 16 output channels at a time.
+CONV_TILE = 16
 
 
 def calibration_feeds(fp32_path: str, data, n: int, stateful: bool, hidden: int) -> list[dict]:
@@ -79,6 +85,59 @@ def small_matmuls(model: onnx.ModelProto, min_weights: int) -> list[str]:
             and max((sizes.get(i, 0) for i in n.input), default=0) < min_weights]
 
 
+def pad_narrow_convs(model: onnx.ModelProto, width: int = CONV_TILE) -> list[str]:
+    """Widens, in place, every Conv with fewer than `width` output channels whose output goes through
+    an optional LeakyRelu/Relu into exactly one other Conv: zero filters and biases are appended, and
+    the next Conv gets zero weights for the new input channels. The network computes the same values
+    (the new channels are 0 after the activation and are multiplied by 0), but tract's int8 kernel
+    picker gives a convolution with fewer than 16 output channels its 8-row AMX tile, which costs the
+    compact model's first convolution 3x (docs/int8-speed.md). Returns the widened Convs' names."""
+    from onnx import numpy_helper as nh
+    g = model.graph
+    inits = {i.name: i for i in g.initializer}
+    consumers: dict[str, list] = {}
+    for n in g.node:
+        for i in n.input:
+            consumers.setdefault(i, []).append(n)
+    outputs = {o.name for o in g.output}
+
+    def only_consumer(tensor):
+        c = consumers.get(tensor, [])
+        return c[0] if len(c) == 1 and tensor not in outputs else None
+
+    def attr(node, name, default):
+        return next((onnx.helper.get_attribute_value(a) for a in node.attribute if a.name == name), default)
+
+    widened = []
+    for conv in [n for n in g.node if n.op_type == "Conv"]:
+        if len(conv.input) < 2 or conv.input[1] not in inits or attr(conv, "group", 1) != 1:
+            continue
+        w = nh.to_array(inits[conv.input[1]])
+        if w.shape[0] >= width:
+            continue
+        nxt = only_consumer(conv.output[0])
+        if nxt is not None and nxt.op_type in ("LeakyRelu", "Relu"):
+            nxt = only_consumer(nxt.output[0])
+        if (nxt is None or nxt.op_type != "Conv" or attr(nxt, "group", 1) != 1
+                or nxt.input[1] not in inits):
+            continue
+        extra = width - w.shape[0]
+        inits[conv.input[1]].CopyFrom(nh.from_array(
+            np.concatenate([w, np.zeros((extra,) + w.shape[1:], w.dtype)]), conv.input[1]))
+        if len(conv.input) > 2 and conv.input[2] in inits:
+            b = nh.to_array(inits[conv.input[2]])
+            inits[conv.input[2]].CopyFrom(nh.from_array(
+                np.concatenate([b, np.zeros(extra, b.dtype)]), conv.input[2]))
+        w2 = nh.to_array(inits[nxt.input[1]])
+        inits[nxt.input[1]].CopyFrom(nh.from_array(
+            np.concatenate([w2, np.zeros((w2.shape[0], extra) + w2.shape[2:], w2.dtype)], 1),
+            nxt.input[1]))
+        widened.append(conv.name)
+    if widened:
+        del g.value_info[:]  # stale channel counts; re-inferred by whoever loads the graph
+    return widened
+
+
 def quantize_model(fp32_path: str, out_path: str, feeds: list[dict], per_channel: bool = False,
                    ops: str = "auto", calibration: str = "dataset",
                    min_matmul_weights: int = MIN_MATMUL_WEIGHTS) -> float:
@@ -101,12 +160,22 @@ def quantize_model(fp32_path: str, out_path: str, feeds: list[dict], per_channel
                if n.op_type in ("MatMul", "Conv") and "imu" in n.input]
     if ops == "auto":
         exclude += small_matmuls(fp32_model, min_matmul_weights)
-    quantize_static(fp32_path, out_path, Reader(), quant_format=QuantFormat.QOperator,
-                    nodes_to_exclude=exclude,
-                    activation_type=QuantType.QInt8, weight_type=QuantType.QInt8,
-                    op_types_to_quantize=["Conv"] if ops == "conv" else ["Conv", "MatMul"],
-                    per_channel=per_channel,
-                    extra_options={"ActivationSymmetric": True, "WeightSymmetric": True})
+    widened = pad_narrow_convs(fp32_model)
+    source = fp32_path
+    if widened:
+        source = out_path + ".widened-fp32.onnx"
+        onnx.save(fp32_model, source)
+    try:
+        quantize_static(source, out_path, Reader(), quant_format=QuantFormat.QOperator,
+                        nodes_to_exclude=exclude,
+                        activation_type=QuantType.QInt8, weight_type=QuantType.QInt8,
+                        op_types_to_quantize=["Conv"] if ops == "conv" else ["Conv", "MatMul"],
+                        per_channel=per_channel,
+                        extra_options={"ActivationSymmetric": True, "WeightSymmetric": True})
+    finally:
+        if source != fp32_path:
+            import os
+            os.remove(source)
     model = onnx.load(out_path)
     problems = op_problems(model) + [f"nonzero zero point: {n}" for n in nonzero_zero_points(model)]
     if problems:
@@ -115,6 +184,7 @@ def quantize_model(fp32_path: str, out_path: str, feeds: list[dict], per_channel
     meta.update(precision="int8", quantization={
         "recipe": "onnxruntime quantize_static QOperator, s8 symmetric activations+weights",
         "ops": ops, "min_matmul_weights": min_matmul_weights if ops == "auto" else None,
+        "widened_convs": widened,
         "per_channel": per_channel, "calibration": calibration, "calib_windows": len(feeds)})
     set_metadata(model, meta)
     onnx.save(model, out_path)
