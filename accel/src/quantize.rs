@@ -13,6 +13,7 @@ use tract_onnx::prelude::*;
 use tract_onnx::tract_core::internal::*;
 use tract_onnx::tract_core::ops::element_wise::ElementWiseOp;
 use tract_onnx::tract_core::ops::quant::QuantizeLinearI8;
+use tract_onnx::tract_core::{as_op, op_as_typed_op, op_out_of_plan};
 
 /// `QuantizeLinear` from f32 to i8: `y = clamp(round_ties_even(x * scale) + zero_point)`.
 #[derive(Debug, Clone, PartialEq)]
@@ -75,19 +76,11 @@ impl Op for FastQuantizeI8 {
         )])
     }
 
-    fn as_typed(&self) -> Option<&dyn TypedOp> {
-        Some(self)
-    }
+    op_as_typed_op!();
 }
 
 impl EvalOp for FastQuantizeI8 {
-    fn eval_out_of_plan(&self, inputs: TVec<TValue>) -> TractResult<Option<TVec<TValue>>> {
-        Ok(Some(EvalOp::eval(
-            self,
-            &EvalContext::out_of_plan(),
-            inputs,
-        )?))
-    }
+    op_out_of_plan!();
 
     fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
         ensure!(inputs.len() == 1, "FastQuantizeI8: {} inputs", inputs.len());
@@ -107,13 +100,7 @@ impl EvalOp for FastQuantizeI8 {
 }
 
 impl TypedOp for FastQuantizeI8 {
-    fn as_op(&self) -> &dyn Op {
-        self
-    }
-
-    fn as_op_mut(&mut self) -> &mut dyn Op {
-        self
-    }
+    as_op!();
 
     fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
         Ok(tvec!(i8::fact(inputs[0].shape.clone())))

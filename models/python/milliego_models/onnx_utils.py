@@ -44,14 +44,20 @@ def fold_constants(model: onnx.ModelProto) -> onnx.ModelProto:
     return model
 
 
+def consumers_of(graph: onnx.GraphProto) -> dict[str, list]:
+    """Tensor name -> the nodes that read it."""
+    consumers: dict[str, list] = {}
+    for n in graph.node:
+        for i in n.input:
+            consumers.setdefault(i, []).append(n)
+    return consumers
+
+
 def fold_pads_into_convs(model: onnx.ModelProto) -> onnx.ModelProto:
     """Merge zero `Pad` (spatial axes only) into the consuming `Conv`'s `pads` attribute."""
     g = model.graph
     inits = {i.name: i for i in g.initializer}
-    consumers: dict[str, list] = {}
-    for n in g.node:
-        for i in n.input:
-            consumers.setdefault(i, []).append(n)
+    consumers = consumers_of(g)
     drop = set()
     for pad in g.node:
         if pad.op_type != "Pad" or len(consumers.get(pad.output[0], [])) != 1:

@@ -29,7 +29,7 @@ import numpy as np
 import onnx
 
 from .data import expand_panorama, stack_pair
-from .onnx_utils import get_metadata, nonzero_zero_points, op_problems, ort_session, set_metadata
+from .onnx_utils import consumers_of, get_metadata, nonzero_zero_points, op_problems, ort_session, set_metadata
 
 MAX_CHAIN_RUN = 200
 # `--ops auto` quantizes a MatMul only when its weight matrix has at least this many elements: the
@@ -95,10 +95,7 @@ def pad_narrow_convs(model: onnx.ModelProto, width: int = CONV_TILE) -> list[str
     from onnx import numpy_helper as nh
     g = model.graph
     inits = {i.name: i for i in g.initializer}
-    consumers: dict[str, list] = {}
-    for n in g.node:
-        for i in n.input:
-            consumers.setdefault(i, []).append(n)
+    consumers = consumers_of(g)
     outputs = {o.name for o in g.output}
 
     def only_consumer(tensor):
