@@ -20,7 +20,8 @@ for name in sorted(set(a) & set(b)):
             continue
         d = max((abs(p - q) for p, q in zip(x["outputs"], y["outputs"])), default=0.0)
         print(f"{name}: max output difference {d:.3g} (tolerance {tol}); ok {x['ok']} / {y['ok']}; "
-              f"plan passes: {x.get('accel')} / {y.get('accel')}")
+              f"plan passes: {x.get('accel')} / {y.get('accel')}; AMX guard: {x.get('amx_guard')} / "
+              f"{y.get('amx_guard')}")
         if d > tol or not (x["ok"] and y["ok"]):
             bad.append(f"{name}: outputs differ by {d:.3g} > {tol} or a run was not ok")
     elif x != y:

@@ -103,6 +103,19 @@ pub struct PackedIm2Col {
     taps: Vec<usize>,
 }
 
+/// Bytes that tract's AMX int8 kernels read past the end of a K=4-inner B panel of `r` columns
+/// and depth `k` \[B\].
+///
+/// `avx512amx_mmm_i32_{8x8,16x16}` load B as whole 16-row tiles of `4 r` bytes, i.e. 64 K values
+/// per `tileloadd`, `ceil(k / 64)` times per panel, while `PackedI8K4` pads a panel only to a
+/// multiple of 4 in K. The last tile of the last panel therefore reaches
+/// `(ceil(k/64)*64 - ceil(k/4)*4) * r` bytes past the buffer: a segfault when that crosses into an
+/// unmapped page (docs/amx-overread.md). The bytes read there meet the zero K-padding of the A
+/// panel, so they never change a result; allocating them (zeroed) makes the read safe.
+pub fn amx_tile_slack(k: usize, r: usize) -> usize {
+    (k.div_ceil(64) * 64 - k.div_ceil(4) * 4) * r
+}
+
 /// A patch row past k (K=4 padding): zeros.
 const NO_TAP: usize = usize::MAX;
 
@@ -347,9 +360,11 @@ impl PackedIm2Col {
             for grp in 0..g.group {
                 let src = &x[(b * g.c + grp * g.cpg) * plane..][..g.cpg * plane];
                 self.split(src, &mut pin);
+                // Zeroed slack past the last panel: the AMX kernels read whole K=64 tiles
+                // (see [`amx_tile_slack`]).
                 let mut packed = Tensor::zero_aligned_dt(
                     u8::datum_type(),
-                    &[panels * self.panel_len],
+                    &[panels * self.panel_len + amx_tile_slack(g.k, self.r)],
                     self.align.max(CACHE_LINE),
                 )?;
                 self.pack(&pin, &zeros, packed.as_bytes_mut());

@@ -28,10 +28,12 @@
 // targets) in `im2col.rs`. Everything else is safe code.
 #![deny(unsafe_code)]
 
+mod amx;
 mod im2col;
 mod quantize;
 
-pub use im2col::PackedIm2Col;
+pub use amx::{guard_amx, is_amx_kernel, AmxGuard, PanelSlack};
+pub use im2col::{amx_tile_slack, PackedIm2Col};
 pub use quantize::{quantize_i8, FastQuantizeI8};
 use tract_onnx::prelude::*;
 use tract_onnx::tract_core::ops::cnn::conv::Im2Col;
@@ -71,6 +73,27 @@ pub fn enabled() -> bool {
             .map(str::trim),
         Some("0" | "off" | "false")
     )
+}
+
+/// What [`prepare`] did to a plan.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Prepared {
+    /// The speed passes' report, `None` when they were turned off ([`enabled`]).
+    pub speed: Option<Report>,
+    /// The AMX over-read guard's report (it always runs: it is a safety fix, not a speed pass).
+    pub amx: AmxGuard,
+}
+
+/// Everything this crate does between `into_optimized` and `into_runnable`: the speed passes
+/// ([`accelerate`]) unless `MILLIEGO_ACCEL=0`, then [`guard_amx`] in every case.
+pub fn prepare(model: &mut TypedModel) -> TractResult<Prepared> {
+    let speed = if enabled() {
+        Some(accelerate(model)?)
+    } else {
+        None
+    };
+    let amx = guard_amx(model)?;
+    Ok(Prepared { speed, amx })
 }
 
 /// Applies every pass to an optimised model in place. Values computed by the plan do not change.

@@ -108,9 +108,7 @@ pub fn load_state(path: &Path, threads: usize) -> Result<(TypedSimpleState, usiz
             .map_err(e)?;
     }
     let mut typed = model.into_optimized().map_err(e)?;
-    if milliego_accel::enabled() {
-        milliego_accel::accelerate(&mut typed).map_err(e)?;
-    }
+    milliego_accel::prepare(&mut typed).map_err(e)?;
     let plan = plan_with_threads(typed, threads)?;
     Ok((TypedSimpleState::new(&plan).map_err(e)?, h))
 }

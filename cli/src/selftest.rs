@@ -355,7 +355,7 @@ fn model_checks(dir: &std::path::Path, checks: &mut Map<String, Value>) -> Resul
         checks.insert(
             format!("model_{key}"),
             json!({"outputs": outputs, "tolerance": tol, "max_abs_diff_to_onnxruntime": worst, "ok": ok,
-                   "accel": m.accel().map(|r| r.to_string())}),
+                   "accel": m.accel().map(|r| r.to_string()), "amx_guard": m.amx_guard().to_string()}),
         );
     }
     Ok(all_ok)

@@ -111,7 +111,7 @@ pub struct Model {
     zero_state: Tensor,
     radar: Box<[f32; RADAR_LEN]>,
     steps: u64,
-    accel: Option<milliego_accel::Report>,
+    prepared: milliego_accel::Prepared,
 }
 
 /// The values of an f32 tensor, in order.
@@ -212,13 +212,9 @@ impl Model {
         let mut typed = model
             .into_optimized()
             .map_err(|e| iface(format!("{e:#}")))?;
-        // Faster ops with identical values (packed int8 im2col, vectorised quantize); off with
-        // MILLIEGO_ACCEL=0.
-        let accel = if milliego_accel::enabled() {
-            Some(milliego_accel::accelerate(&mut typed).map_err(|e| iface(format!("{e:#}")))?)
-        } else {
-            None
-        };
+        // Faster ops with identical values (packed int8 im2col, vectorised quantize; off with
+        // MILLIEGO_ACCEL=0), and always the guard against tract's AMX int8 over-read.
+        let prepared = milliego_accel::prepare(&mut typed).map_err(|e| iface(format!("{e:#}")))?;
         let out_shapes: Vec<Vec<usize>> = typed
             .output_outlets()
             .map_err(run_err)?
@@ -247,14 +243,19 @@ impl Model {
             exec,
             radar: Box::new([0.0; RADAR_LEN]),
             steps: 0,
-            accel,
+            prepared,
         })
     }
 
     /// What the plan passes of `milliego-accel` changed, or `None` when they were turned off
     /// (`MILLIEGO_ACCEL=0`).
     pub fn accel(&self) -> Option<&milliego_accel::Report> {
-        self.accel.as_ref()
+        self.prepared.speed.as_ref()
+    }
+
+    /// What the AMX over-read guard found and padded (docs/amx-overread.md).
+    pub fn amx_guard(&self) -> &milliego_accel::AmxGuard {
+        &self.prepared.amx
     }
 
     /// The model's metadata.
