@@ -32,6 +32,9 @@ impl Health {
     pub const PREDICTED: Health = Health(1 << 5);
     /// The pipeline (re)started: the trajectory origin was reset.
     pub const RESET: Health = Health(1 << 6);
+    /// The estimator changed at this pose (for example the learned model handed over to the
+    /// Doppler filter): the trajectory goes on in the same world frame, no new origin.
+    pub const HANDOVER: Health = Health(1 << 7);
 
     /// True when every flag of `other` is set.
     pub fn contains(self, other: Health) -> bool {
@@ -51,7 +54,7 @@ impl Health {
             "frames_dropped",
             "predicted",
             "reset",
-            "bit7",
+            "handover",
             "bit8",
             "bit9",
             "bit10",

@@ -66,16 +66,27 @@ impl Composer {
         self.len = 0;
     }
 
-    /// Composes `r` onto the trajectory.
+    /// Composes `r` onto the trajectory. A `from` frame the ring does not hold starts a new
+    /// origin (see [`Composer::push_from`] to continue instead).
     pub fn push(&mut self, r: &RelativePose) -> Composed {
-        let (from, reset) = match self.pose_of(r.from_frame) {
-            Some(p) => (p, false),
+        match self.pose_of(r.from_frame) {
+            Some(p) => self.compose(r, p, false),
             None => {
                 self.resets += 1;
                 self.len = 0;
-                (Isometry3::identity(), true)
+                self.compose(r, Isometry3::identity(), true)
             }
-        };
+        }
+    }
+
+    /// Composes `r` from `from_pose`, the world pose of `r.from_frame` as known otherwise (for
+    /// example from another estimator's chain at a hand-over): the trajectory goes on, no new
+    /// origin. Frames already on the trajectory are kept.
+    pub fn push_from(&mut self, r: &RelativePose, from_pose: Isometry3<f64>) -> Composed {
+        self.compose(r, from_pose, false)
+    }
+
+    fn compose(&mut self, r: &RelativePose, from: Isometry3<f64>, reset: bool) -> Composed {
         let pose = from * r.rel;
         // Motion since the previous radar-rate pose (whatever the estimator's stride).
         let rel = match (&self.last, reset) {

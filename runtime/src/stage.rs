@@ -2,8 +2,8 @@
 //! trajectory, builds pose messages (radar rate, and IMU-propagated ones flagged PREDICTED), and
 //! decides the health flags.
 
-use crate::composer::{wxyz_f32, Composer};
-use crate::estimator::{Built, ImuInput, Mounting, RadarInput};
+use crate::composer::{wxyz_f32, Composed, Composer};
+use crate::estimator::{Built, ImuInput, Mounting, RadarInput, RelativePose};
 use crate::reader::RadarItem;
 use crate::sync::SyncOut;
 use milliego_odometry::strapdown::{ImuSample, NavState, Strapdown, STANDARD_GRAVITY};
@@ -13,6 +13,14 @@ use pose_link::{Estimator as Code, Health, PoseMessage};
 /// IMU samples kept to re-integrate the prediction from a radar-rate pose that arrives after
 /// later samples were previewed.
 const RECENT: usize = 256;
+
+/// What the estimators made of one radar frame.
+enum Step {
+    /// A relative pose on the current chain.
+    Pose(RelativePose),
+    /// The fallback took over: its relative pose, and the world pose of its `from` frame.
+    Handover(RelativePose, Isometry3<f64>),
+}
 
 /// A pose on its way to the outputs.
 #[derive(Debug, Clone, Copy)]
@@ -49,6 +57,8 @@ pub struct StageCounters {
     pub errors: u64,
     /// Origin resets.
     pub resets: u64,
+    /// Hand-overs from the primary estimator to the fallback (the trajectory goes on).
+    pub handovers: u64,
 }
 
 /// The estimator stage.
@@ -58,6 +68,12 @@ pub struct Stage {
     use_fallback: bool,
     /// The trajectory.
     pub composer: Composer,
+    /// The fallback's own chain while the primary runs: at a hand-over it carries the fallback's
+    /// motion from the trajectory's last frame, so the trajectory goes on without a new origin.
+    shadow: Composer,
+    // Handed over, but the fallback's first pose (the bridge) is still to come.
+    bridging: bool,
+    pending_handover: bool,
     predict: Option<Strapdown>,
     // World pose of the IMU-integration frame's origin: predicted poses are the last radar-rate
     // pose moved by what the IMU integrated since.
@@ -90,6 +106,9 @@ impl Stage {
             built,
             use_fallback: false,
             composer: Composer::default(),
+            shadow: Composer::default(),
+            bridging: false,
+            pending_handover: false,
             predict: None,
             anchor: None,
             last_imu: None,
@@ -282,38 +301,18 @@ impl Stage {
             frame_number: item.frame_number,
             points: &item.points,
         };
-        let r = if self.use_fallback {
-            self.built
-                .fallback
-                .as_mut()
-                .and_then(|e| e.push_radar(&f).ok().flatten())
-        } else {
-            let res = self.built.primary.push_radar(&f);
-            let fb = self.built.fallback.as_mut().map(|e| e.push_radar(&f));
-            match (res, fb) {
-                (Ok(r), _) if self.built.primary.healthy() => r,
-                (res, Some(fb)) => {
-                    if let Err(e) = res {
-                        tracing::warn!(error = %e, "primary estimator failed");
-                    }
-                    tracing::warn!("primary estimator unhealthy: switching to the fallback");
-                    self.use_fallback = true;
-                    self.composer.clear();
-                    fb.ok().flatten()
-                }
-                (Ok(r), None) => r,
-                (Err(e), None) => {
-                    self.counters.errors += 1;
-                    tracing::warn!(error = %e, "estimator error");
-                    None
-                }
+        let (r, c) = match self.estimate(&f) {
+            Some(Step::Pose(r)) => (r, self.composer.push(&r)),
+            Some(Step::Handover(r, from_pose)) => {
+                self.counters.handovers += 1;
+                self.pending_handover = true;
+                (r, self.composer.push_from(&r, from_pose))
+            }
+            None => {
+                self.counters.no_pose += 1;
+                return;
             }
         };
-        let Some(r) = r else {
-            self.counters.no_pose += 1;
-            return;
-        };
-        let c = self.composer.push(&r);
         if c.reset {
             self.counters.resets += 1;
         }
@@ -357,6 +356,10 @@ impl Stage {
             flags = Health(flags.0 | Health::RESET.0);
             self.pending_reset = false;
         }
+        if self.pending_handover {
+            flags = Health(flags.0 | Health::HANDOVER.0);
+            self.pending_handover = false;
+        }
         let msg = self.message(
             &c.pose,
             Some(&c.rel),
@@ -371,6 +374,75 @@ impl Stage {
             read_ns: item.read_ns,
             emitted_ns: now_ns,
         });
+    }
+
+    /// Runs the estimator(s) on one frame. While the primary is healthy the fallback runs beside
+    /// it on its own chain; when the primary fails, the fallback takes over from the trajectory's
+    /// last pose (a hand-over, never a new origin).
+    fn estimate(&mut self, f: &RadarInput<'_>) -> Option<Step> {
+        if self.use_fallback {
+            let fb = self.built.fallback.as_mut()?;
+            let r = fb.push_radar(f).ok().flatten()?;
+            if !self.bridging {
+                return Some(Step::Pose(r));
+            }
+            self.bridging = false;
+            return Some(match self.composer.last() {
+                // Nothing composed yet: the fallback's chain is the trajectory.
+                None => Step::Pose(r),
+                Some(last) => Step::Handover(r, self.bridge(last, &r)),
+            });
+        }
+        let res = self.built.primary.push_radar(f);
+        let Some(fb) = self.built.fallback.as_mut() else {
+            return match res {
+                Ok(r) => r.map(Step::Pose),
+                Err(e) => {
+                    self.counters.errors += 1;
+                    tracing::warn!(error = %e, "estimator error");
+                    None
+                }
+            };
+        };
+        let fb = fb.push_radar(f).ok().flatten();
+        match res {
+            Ok(r) if self.built.primary.healthy() => {
+                if let Some(x) = &fb {
+                    self.shadow.push(x);
+                }
+                r.map(Step::Pose)
+            }
+            res => {
+                if let Err(e) = res {
+                    self.counters.errors += 1;
+                    tracing::warn!(error = %e, "primary estimator failed");
+                }
+                tracing::warn!("primary estimator unhealthy: handing over to the fallback");
+                self.use_fallback = true;
+                let Some(r) = fb else {
+                    // The fallback has no pose for this frame: bridge at its next one.
+                    self.bridging = true;
+                    return None;
+                };
+                Some(match self.composer.last() {
+                    None => Step::Pose(r),
+                    Some(last) => Step::Handover(r, self.bridge(last, &r)),
+                })
+            }
+        }
+    }
+
+    /// World pose of `r.from_frame` at a hand-over: the trajectory's last pose moved by the
+    /// fallback's own motion from that frame to `r.from_frame` (its shadow chain), or the last
+    /// pose itself when the shadow does not hold both frames.
+    fn bridge(&self, last: &Composed, r: &RelativePose) -> Isometry3<f64> {
+        match (
+            self.shadow.pose_of(last.frame),
+            self.shadow.pose_of(r.from_frame),
+        ) {
+            (Some(at_last), Some(at_from)) => last.pose * (at_last.inverse() * at_from),
+            _ => last.pose,
+        }
     }
 
     fn message(
