@@ -373,6 +373,12 @@ pub struct RadarConfig {
     pub gui: Option<GuiMonitor>,
     /// Data port baud rate from configDataPort \[bit/s\].
     pub data_baud: Option<u32>,
+    /// Sub-frames per frame: `numOfSubFrames` of advFrameCfg (advanced frame configuration), 1
+    /// without it.
+    pub num_subframes: u8,
+    /// extendedMaxVelocity enabled for some sub-frame (the demo then unfolds radial velocities up
+    /// to twice the unambiguous maximum).
+    pub extended_max_velocity: bool,
     /// Commands kept but not modelled (tracking, monitoring, ...).
     pub other_commands: u32,
     /// Comment lines.
@@ -452,6 +458,11 @@ pub struct Derived {
     pub bytes_per_point: u32,
     /// Points per frame the UART can carry before frames start to back up.
     pub max_points_per_frame: u32,
+    /// Sub-frames per frame (advFrameCfg; 1 without it).
+    pub num_subframes: u32,
+    /// extendedMaxVelocity is enabled: radial velocities may reach twice
+    /// [`Derived::max_velocity_mps`].
+    pub extended_max_velocity: bool,
 }
 
 impl RadarConfig {
@@ -465,6 +476,8 @@ impl RadarConfig {
             adc_output_fmt: None,
             gui: None,
             data_baud: None,
+            num_subframes: 1,
+            extended_max_velocity: false,
             other_commands: 0,
             comments: 0,
         };
@@ -487,7 +500,22 @@ impl RadarConfig {
                 Command::Adc { output_fmt } => c.adc_output_fmt = Some(output_fmt),
                 Command::GuiMonitor(g) => c.gui = Some(g),
                 Command::DataPort { baud } => c.data_baud = Some(baud),
-                Command::Other { .. } => c.other_commands += 1,
+                Command::Other { name } => {
+                    c.other_commands += 1;
+                    match name {
+                        // advFrameCfg numOfSubFrames forceProfile numFrames triggerSelect frameTrigDelay
+                        "advFrameCfg" => {
+                            let a = Args::new("advFrameCfg", &line, 1)?;
+                            c.num_subframes = a.u::<u8>(0)?.max(1);
+                        }
+                        // extendedMaxVelocity subFrameIdx enabled
+                        "extendedMaxVelocity" => {
+                            let a = Args::new("extendedMaxVelocity", &line, 2)?;
+                            c.extended_max_velocity |= a.flag(1)?;
+                        }
+                        _ => {}
+                    }
+                }
                 Command::SensorStop | Command::SensorStart | Command::FlushCfg => {}
             }
         }
@@ -616,6 +644,8 @@ impl RadarConfig {
             fixed_bytes_per_frame: fixed,
             bytes_per_point,
             max_points_per_frame,
+            num_subframes: u32::from(self.num_subframes.max(1)),
+            extended_max_velocity: self.extended_max_velocity,
         })
     }
 }
@@ -638,6 +668,19 @@ mod tests {
         );
         assert_eq!(c.comments, 1);
         assert_eq!(c.channel, Some((15, 7)));
+        assert_eq!((c.num_subframes, c.extended_max_velocity), (1, false));
+    }
+
+    #[test]
+    fn advanced_frame_and_extended_velocity_are_recorded() {
+        let text = format!("{CFG}advFrameCfg 2 0 0 1 0\nextendedMaxVelocity -1 1\n");
+        let c = RadarConfig::parse(&text).unwrap();
+        assert_eq!((c.num_subframes, c.extended_max_velocity), (2, true));
+        let d = c.derive(None).unwrap();
+        assert_eq!((d.num_subframes, d.extended_max_velocity), (2, true));
+        let c = RadarConfig::parse("extendedMaxVelocity -1 0\n").unwrap();
+        assert!(!c.extended_max_velocity);
+        assert!(RadarConfig::parse("advFrameCfg x").is_err());
     }
 
     #[test]

@@ -10,6 +10,9 @@
 //! * [`tlv`] decodes TLV payloads into typed views; unknown types pass through raw.
 //! * [`cfg`](mod@cfg) parses `.cfg` files and derives range/velocity resolution, frame period and the
 //!   points-per-frame bound; [`clock`] unwraps the sensor clock.
+//! * [`plausible`] judges each released frame against what is known (frame-number continuity,
+//!   the sensor clock, the .cfg's range/velocity/point limits, finite values): the format has no
+//!   checksum, so a corrupted byte inside a frame is caught there or not at all.
 //! * [`encode`] writes frames of every layout (tests, fuzz seeds, the simulator).
 //! * With the `std` feature, [`host`] adds a timestamping reader and the CLI-port controller.
 //!
@@ -42,6 +45,7 @@ pub mod frame;
 pub mod framer;
 #[cfg(feature = "std")]
 pub mod host;
+pub mod plausible;
 pub mod tlv;
 
 pub use error::{FrameError, TlvError};

@@ -201,6 +201,8 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
     // Everything that can fail at start-up fails here, with one message.
     let mut sinks = Vec::new();
     let mut session = None;
+    // What the radar .cfg lets the live reader's plausibility checker hold frames to.
+    let mut radar_limits = radar_driver::plausible::Limits::default();
     match input {
         Input::Session { dir, .. } => {
             let s = milliego_session::Session::open(dir)
@@ -241,6 +243,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
                 cfg.classical.ego.sigma = dv.velocity_resolution_mps as f32 / 2.0;
                 cfg.sync.radar_period_s = Some(dv.frame_period_ms / 1e3);
                 cfg.sync.half_chirps_s = dv.active_frame_time_ms / 2e3;
+                radar_limits = radar_driver::plausible::Limits::from_derived(&dv);
             }
         }
     }
@@ -276,12 +279,15 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
     let radar_stats = Arc::new(ReaderStats::default());
     let imu_stats = Arc::new(ReaderStats::default());
     let decoded = Arc::new([AtomicU64::new(0), AtomicU64::new(0)]);
+    // The radar plausibility verdicts: the session decoder's report, or the live reader's counters.
+    let mut session_radar_report = None;
     if let Some(s) = session {
         let realtime = matches!(input, Input::Session { realtime: true, .. });
         let sh2 = Arc::clone(&sh);
         let dec = Arc::clone(&decoded);
-        let (frames, _) =
+        let (frames, radar_rep) =
             milliego_session::streams::radar_frames(&s).map_err(|e| err(e.to_string()))?;
+        session_radar_report = Some(radar_rep);
         let (imu, _) =
             milliego_session::streams::imu_samples(&s).map_err(|e| err(e.to_string()))?;
         if imu.is_empty() && frames.is_empty() {
@@ -354,11 +360,13 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
                 max_backoff: Duration::from_secs(1),
             };
             let dec = Arc::clone(&decoded);
+            let stats = Arc::clone(&radar_stats);
             input_threads.push(
                 std::thread::Builder::new()
                     .name("radar".into())
                     .spawn(move || {
-                        let mut decoder = RadarDecoder::new(have_cfg.then_some(vres), period);
+                        let mut decoder = RadarDecoder::new(have_cfg.then_some(vres), period)
+                            .with_limits(radar_limits);
                         let mut sink = radar_sink(&sh2.radar_q, &sh2.pool);
                         read_loop(&mut src, Some(port), &ctx, |b, host_s, ns, reopened| {
                             if reopened {
@@ -366,6 +374,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
                             }
                             sh2.last_data_ns.store(ns, Ordering::Relaxed);
                             decoder.feed(b, host_s, ns, &mut sink);
+                            decoder.publish(&stats);
                             dec[0].store(decoder.frames, Ordering::Relaxed);
                         });
                     })
@@ -633,13 +642,43 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         imu_to_pose: h_imu,
     };
     let radar_in = decoded[0].load(Ordering::Relaxed);
+    let plausibility = match &session_radar_report {
+        Some(r) => json!({
+            "rejected": r
+                .implausible_by_reason()
+                .map(|(n, c)| (n.to_string(), json!(c)))
+                .collect::<serde_json::Map<String, serde_json::Value>>(),
+            "rejected_total": r.implausible_total(),
+            "reanchored": r.reanchored,
+            "retracted_after_emit": 0,
+        }),
+        None => {
+            let by: serde_json::Map<String, serde_json::Value> =
+                radar_driver::plausible::IMPLAUSIBLE_NAMES
+                    .iter()
+                    .zip(&radar_stats.implausible)
+                    .map(|(n, c)| ((*n).to_string(), json!(c.load(Ordering::Relaxed))))
+                    .collect();
+            let total: u64 = radar_stats
+                .implausible
+                .iter()
+                .map(|c| c.load(Ordering::Relaxed))
+                .sum();
+            json!({
+                "rejected": by,
+                "rejected_total": total,
+                "reanchored": radar_stats.reanchored.load(Ordering::Relaxed),
+                "retracted_after_emit": radar_stats.retracted_after_emit.load(Ordering::Relaxed),
+            })
+        }
+    };
     let json = json!({
         "estimator": cfg.estimator.name(),
         "input": if offline { "session" } else { "devices" },
         "wall_s": wall_s,
         "frames_in": {"radar": radar_in, "imu": decoded[1].load(Ordering::Relaxed)},
         "frames_out": {"poses_sent": sent, "radar_rate": radar_poses, "predicted": stage_counters.predicted_poses,
-                        "no_pose": stage_counters.no_pose, "resets": stage_counters.resets, "estimator_errors": stage_counters.errors,
+                        "no_pose": stage_counters.no_pose, "resets": stage_counters.resets, "handovers": stage_counters.handovers, "estimator_errors": stage_counters.errors,
                         "send_errors": send_errors},
         "drops": {"radar_queue": sh.radar_q.dropped(), "imu_queue": sh.imu_q.dropped(), "sync_buffers": sync_counters.dropped,
                   "event_queue": sh.ev_q.dropped(), "pose_queue": sh.pose_q.dropped(), "total": dropped_total},
@@ -649,6 +688,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
                   "radar_bytes": radar_stats.bytes.load(Ordering::Relaxed), "imu_bytes": imu_stats.bytes.load(Ordering::Relaxed)},
         "latency": {"sync": latency.sync.to_json(), "estimate": latency.estimate.to_json(), "output": latency.output.to_json(),
                     "end_to_end": latency.end_to_end.to_json(), "imu_to_pose": latency.imu_to_pose.to_json()},
+        "radar_plausibility": plausibility,
         "per_radar_frame_us": if radar_in > 0 { wall_s * 1e6 / radar_in as f64 } else { 0.0 },
     });
     Ok(Summary {

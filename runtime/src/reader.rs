@@ -6,7 +6,8 @@ use crate::queue::{DropOldest, Pool};
 use imu_driver::{Checker, LogFramer, Message, TimeWrap};
 use radar_driver::clock::{cpu_clock_hz, CycleUnwrapper};
 use radar_driver::host::{Point, PointCloud};
-use radar_driver::{Framer, Poll, DEFAULT_MAX_FRAME};
+use radar_driver::plausible::{CheckCounters, Checker as RadarChecker, Limits, IMPLAUSIBLE_KINDS};
+use radar_driver::{FrameError, Framer, Poll, DEFAULT_MAX_FRAME};
 use std::io::{self, Read};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -70,15 +71,27 @@ pub struct ImuItem {
     pub t: Option<f64>,
 }
 
-/// Radar framer and decoder, reusing its buffers.
+/// Radar framer, plausibility checker and decoder, reusing its buffers.
+///
+/// Each released frame goes through the [`RadarChecker`] before it is decoded and emitted (as in the
+/// offline [`milliego_session::streams::radar_frames`], with the same limits the same frames are
+/// rejected). A frame the framer retracts after it was emitted
+/// ([`FrameError::OverlapsNextFrame`]) cannot be taken back from the pipeline here (that would
+/// need the next frame's first bytes: a frame of latency), but the checker and the sensor clock
+/// forget it, so the frames after it are judged and stamped as offline.
 pub struct RadarDecoder {
     framer: Box<Framer<DEFAULT_MAX_FRAME>>,
+    checker: RadarChecker,
     clock: Option<CycleUnwrapper>,
+    clock_before: Option<CycleUnwrapper>,
     period_s: Option<f64>,
     vres: Option<f32>,
     cloud: PointCloud,
-    /// Frames decoded.
+    /// Frames decoded (plausible ones: rejected frames are in [`RadarDecoder::plausibility`]).
     pub frames: u64,
+    /// Emitted frames the framer retracted afterwards (they lost bytes on the wire).
+    pub retracted_after_emit: u64,
+    last_emitted: bool,
 }
 
 impl std::fmt::Debug for RadarDecoder {
@@ -98,17 +111,45 @@ impl RadarDecoder {
         cloud.tlv_types.reserve(16);
         RadarDecoder {
             framer: Box::default(),
+            checker: RadarChecker::default(),
             clock: None,
+            clock_before: None,
             period_s,
             vres,
             cloud,
             frames: 0,
+            retracted_after_emit: 0,
+            last_emitted: false,
         }
+    }
+
+    /// Holds frames to `limits` (from the `.cfg`: [`Limits::from_derived`]) instead of the
+    /// defaults.
+    pub fn with_limits(mut self, limits: Limits) -> Self {
+        self.checker = RadarChecker::new(limits);
+        self
     }
 
     /// Bad frames and skipped bytes so far.
     pub fn counters(&self) -> &radar_driver::Counters {
         self.framer.counters()
+    }
+
+    /// Plausibility verdicts so far (rejections by reason, re-anchors, retractions).
+    pub fn plausibility(&self) -> &CheckCounters {
+        self.checker.counters()
+    }
+
+    /// Copies the plausibility counters into the reader's shared counters.
+    pub fn publish(&self, stats: &ReaderStats) {
+        let c = self.checker.counters();
+        for (a, v) in stats.implausible.iter().zip(c.rejected) {
+            a.store(v, Ordering::Relaxed);
+        }
+        stats.reanchored.store(c.reanchored, Ordering::Relaxed);
+        stats
+            .retracted_after_emit
+            .store(self.retracted_after_emit, Ordering::Relaxed);
     }
 
     /// Feeds bytes read at `host_s` / `read_ns`; `emit` gets each frame, filled into `item`
@@ -123,8 +164,13 @@ impl RadarDecoder {
         loop {
             match self.framer.poll(&mut input) {
                 Poll::Frame(f) => {
+                    self.last_emitted = false;
+                    if !self.checker.check(&f).is_accept() {
+                        continue;
+                    }
                     let h = *f.header();
                     let period = self.period_s;
+                    self.clock_before = self.clock;
                     let sensor_s = h.time_cpu_cycles.and_then(|c| {
                         self.clock
                             .get_or_insert_with(|| CycleUnwrapper::new(cpu_clock_hz(&h), period))
@@ -148,8 +194,20 @@ impl RadarDecoder {
                         it.points.clear();
                         it.points.extend_from_slice(&cloud.points);
                     });
+                    self.last_emitted = true;
                 }
-                Poll::Dropped { .. } => {}
+                Poll::Dropped {
+                    error: FrameError::OverlapsNextFrame { .. },
+                    ..
+                } => {
+                    self.checker.retract();
+                    if self.last_emitted {
+                        self.clock = self.clock_before;
+                        self.retracted_after_emit += 1;
+                    }
+                    self.last_emitted = false;
+                }
+                Poll::Dropped { .. } => self.last_emitted = false,
                 Poll::NeedMore => break,
             }
         }
@@ -279,6 +337,12 @@ pub struct ReaderStats {
     pub reopens: AtomicU64,
     /// True while the port is open.
     pub connected: AtomicBool,
+    /// Radar frames rejected as implausible, by [`radar_driver::plausible::Implausible::kind_index`].
+    pub implausible: [AtomicU64; IMPLAUSIBLE_KINDS],
+    /// Radar frames that confirmed a sensor restart or frame-number jump.
+    pub reanchored: AtomicU64,
+    /// Radar frames emitted and then retracted by the framer (they lost bytes on the wire).
+    pub retracted_after_emit: AtomicU64,
 }
 
 /// What a reader thread needs.
@@ -378,6 +442,70 @@ pub fn radar_sink<'a>(
         fill(&mut it);
         if let Some(old) = q.push(it) {
             pool.give(old);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use radar_driver::encode::FrameBuilder;
+
+    /// Frames 1..=12: 4 with a corrupted number, 7 with a NaN point, 9 (number 20, in the
+    /// window) one byte short so the framer retracts it after release.
+    fn stream() -> Vec<u8> {
+        let pts = [[1.0, 2.0, 0.0, 0.5], [0.5, 3.0, 0.1, -0.2]];
+        let nan = [[1.0, f32::NAN, 0.0, 0.5], [0.5, 3.0, 0.1, -0.2]];
+        let mut bytes = Vec::new();
+        for n in 1..=12u32 {
+            let number = match n {
+                4 => 1004,
+                9 => 20,
+                _ => n,
+            };
+            let p: &[[f32; 4]] = if n == 7 { &nan } else { &pts };
+            let mut f = FrameBuilder::oob(0x0303_0002, 0xA6843, number)
+                .points(p)
+                .to_vec();
+            if n == 9 {
+                f.pop();
+            }
+            bytes.extend(f);
+        }
+        bytes
+    }
+
+    #[test]
+    fn the_live_decoder_rejects_counts_and_forgets_retracted_frames() {
+        let bytes = stream();
+        for chunk in [1usize, 7, 100, 4096] {
+            let mut dec = RadarDecoder::new(None, None).with_limits(Limits::default());
+            let mut seen = Vec::new();
+            for c in bytes.chunks(chunk) {
+                dec.feed(c, 0.0, 0, |fill| {
+                    let mut it = RadarItem::default();
+                    fill(&mut it);
+                    seen.push(it.frame_number);
+                });
+            }
+            // 20 was emitted before the framer could know it was short; 10 still follows 8.
+            assert_eq!(
+                seen,
+                [1, 2, 3, 5, 6, 8, 20, 10, 11, 12],
+                "chunks of {chunk}"
+            );
+            let p = dec.plausibility();
+            assert_eq!(p.rejected_total(), 2);
+            assert_eq!(p.rejected[0], 1, "frame_number");
+            assert_eq!(p.rejected[7], 1, "non_finite");
+            assert_eq!(
+                (p.retracted, dec.retracted_after_emit, dec.frames),
+                (1, 1, 10)
+            );
+            let stats = ReaderStats::default();
+            dec.publish(&stats);
+            assert_eq!(stats.implausible[0].load(Ordering::Relaxed), 1);
+            assert_eq!(stats.retracted_after_emit.load(Ordering::Relaxed), 1);
         }
     }
 }

@@ -1,13 +1,17 @@
 //! A session's streams decoded and time-stamped: radar point clouds and IMU samples, each with the
 //! host time of the chunk that completed it (when the session has an index) and its sensor time.
 //! This is what offline runs, dataset export and evaluation read; nothing is dropped silently:
-//! [`StreamReport`] counts what the framers rejected.
+//! [`StreamReport`] counts what the framers rejected and, for radar frames, what the plausibility
+//! checker ([`radar_driver::plausible`]) rejected, by reason.
 
 use crate::{Session, SessionError, Stream};
 use imu_driver::{Checker, LogFramer, Message, TimeWrap};
 use radar_driver::cfg::RadarConfig;
 use radar_driver::clock::{cpu_clock_hz, CycleUnwrapper};
 use radar_driver::host::PointCloud;
+use radar_driver::plausible::{
+    Checker as RadarChecker, Limits, IMPLAUSIBLE_KINDS, IMPLAUSIBLE_NAMES,
+};
 use radar_driver::{Framer, Poll, DEFAULT_MAX_FRAME};
 
 /// A decoded radar frame.
@@ -48,7 +52,7 @@ pub struct ImuSample {
 pub struct StreamReport {
     /// Bytes read \[B\].
     pub bytes: u64,
-    /// Frames or messages decoded.
+    /// Frames or messages decoded (radar: released by the framer and found plausible).
     pub ok: u64,
     /// Frames or messages rejected by the framer.
     pub bad: u64,
@@ -56,10 +60,43 @@ pub struct StreamReport {
     pub bytes_skipped: u64,
     /// Messages without the fields a sample needs (config acks, GNSS-only messages, ...).
     pub not_samples: u64,
+    /// Radar frames the framer released but the plausibility checker rejected, indexed by
+    /// [`radar_driver::plausible::Implausible::kind_index`] (names: [`IMPLAUSIBLE_NAMES`]).
+    pub implausible: [u64; IMPLAUSIBLE_KINDS],
+    /// Radar frames that confirmed a sensor restart or frame-number jump (the frame before them
+    /// was rejected as `frame_number`, these were accepted).
+    pub reanchored: u64,
+}
+
+impl StreamReport {
+    /// Radar frames rejected as implausible, all reasons.
+    pub fn implausible_total(&self) -> u64 {
+        self.implausible.iter().sum()
+    }
+
+    /// `(reason, count)` of the implausible radar frames, every reason listed.
+    pub fn implausible_by_reason(&self) -> impl Iterator<Item = (&'static str, u64)> + '_ {
+        IMPLAUSIBLE_NAMES
+            .iter()
+            .copied()
+            .zip(self.implausible.iter().copied())
+    }
+}
+
+/// The plausibility limits a session's radar `.cfg` implies (the defaults without one).
+pub fn radar_limits(session: &Session) -> Result<Limits, SessionError> {
+    Ok(session
+        .radar_cfg()?
+        .and_then(|text| RadarConfig::parse(&text).ok())
+        .and_then(|c| c.derive(None).ok())
+        .map_or_else(Limits::default, |d| Limits::from_derived(&d)))
 }
 
 /// Decodes the radar stream: frames, point clouds (Doppler indices scaled with the session's .cfg
-/// when it has one), sensor time unwrapped with the .cfg's frame period.
+/// when it has one), sensor time unwrapped with the .cfg's frame period. Every released frame goes
+/// through the plausibility [`RadarChecker`] with the .cfg's [`Limits`] (see [`radar_limits`]);
+/// rejected frames are left out and counted in [`StreamReport::implausible`]. The same checker, fed
+/// the same frames, runs in the runtime's live reader.
 pub fn radar_frames(session: &Session) -> Result<(Vec<RadarFrame>, StreamReport), SessionError> {
     let Some(stream) = &session.radar else {
         return Ok((Vec::new(), StreamReport::default()));
@@ -70,9 +107,15 @@ pub fn radar_frames(session: &Session) -> Result<(Vec<RadarFrame>, StreamReport)
         .and_then(|c| c.derive(None).ok());
     let vres = derived.map(|d| d.velocity_resolution_mps as f32);
     let period_s = derived.map(|d| d.frame_period_ms / 1e3);
+    let limits = derived.map_or_else(Limits::default, |d| Limits::from_derived(&d));
     let bytes = stream.read_all()?;
     let mut framer: Box<Framer<DEFAULT_MAX_FRAME>> = Box::default();
+    let mut checker = RadarChecker::new(limits);
     let mut clock: Option<CycleUnwrapper> = None;
+    // The clock before the last accepted frame, and whether that frame is the last in `out`: a
+    // retraction takes both back.
+    let mut clock_before: Option<CycleUnwrapper> = None;
+    let mut last_in_out = false;
     let mut out = Vec::new();
     for chunk in stream.chunks() {
         let host_s = chunk.host_ns.map(|n| n as f64 * 1e-9);
@@ -80,7 +123,12 @@ pub fn radar_frames(session: &Session) -> Result<(Vec<RadarFrame>, StreamReport)
         loop {
             match framer.poll(&mut input) {
                 Poll::Frame(f) => {
+                    last_in_out = false;
+                    if !checker.check(&f).is_accept() {
+                        continue;
+                    }
                     let h = *f.header();
+                    clock_before = clock;
                     let sensor_s = h.time_cpu_cycles.and_then(|c| {
                         clock
                             .get_or_insert_with(|| CycleUnwrapper::new(cpu_clock_hz(&h), period_s))
@@ -94,29 +142,40 @@ pub fn radar_frames(session: &Session) -> Result<(Vec<RadarFrame>, StreamReport)
                         bytes: f.as_bytes().len(),
                         cloud: PointCloud::from_frame(&f, vres),
                     });
+                    last_in_out = true;
                 }
-                // The frame released just before lost bytes on the wire: take it back.
+                // The frame released just before lost bytes on the wire: take it back, and with
+                // it its effect on the continuity anchor and the clock.
                 Poll::Dropped {
                     error: radar_driver::FrameError::OverlapsNextFrame { .. },
                     ..
                 } => {
-                    out.pop();
+                    checker.retract();
+                    if last_in_out {
+                        out.pop();
+                        clock = clock_before;
+                    }
+                    last_in_out = false;
                 }
-                Poll::Dropped { .. } => {}
+                Poll::Dropped { .. } => last_in_out = false,
                 Poll::NeedMore => break,
             }
         }
     }
     framer.finish();
     let c = framer.counters();
+    let p = checker.counters();
+    debug_assert_eq!(c.frames_ok, p.accepted + p.rejected_total());
     Ok((
         out,
         StreamReport {
             bytes: c.bytes_in,
-            ok: c.frames_ok,
+            ok: p.accepted,
             bad: c.frames_bad_total(),
             bytes_skipped: c.bytes_skipped,
             not_samples: 0,
+            implausible: p.rejected,
+            reanchored: p.reanchored,
         },
     ))
 }

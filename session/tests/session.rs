@@ -217,3 +217,42 @@ fn real_captures_sniff_as_what_they_are() {
         Some(StreamKind::Imu)
     );
 }
+
+#[test]
+fn implausible_radar_frames_are_left_out_and_counted_by_reason() {
+    use milliego_session::streams::radar_frames;
+    let pts = [[1.0, 2.0, 0.0, 0.5], [0.5, 3.0, 0.1, -0.2]];
+    let nan = [[1.0, f32::NAN, 0.0, 0.5], [0.5, 3.0, 0.1, -0.2]];
+    let mut bytes = Vec::new();
+    for n in 1..=12u32 {
+        let number = match n {
+            4 => 1004, // a corrupted frame number
+            9 => 20,   // in the window: would move the anchor, but the frame is retracted
+            _ => n,
+        };
+        let p: &[[f32; 4]] = if n == 7 { &nan } else { &pts };
+        let mut f = FrameBuilder::oob(0x0303_0002, 0xA6843, number)
+            .points(p)
+            .to_vec();
+        assert_eq!(f.len(), 96, "16 B of padding");
+        if n == 9 {
+            // One byte lost on the wire: frame 9 ends inside frame 10's magic and is retracted.
+            f.pop();
+        }
+        bytes.extend(f);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let dat = dir.path().join("capture.dat");
+    fs::write(&dat, &bytes).unwrap();
+    let (frames, rep) = radar_frames(&Session::open(&dat).unwrap()).unwrap();
+    let numbers: Vec<u32> = frames.iter().map(|f| f.frame_number).collect();
+    assert_eq!(
+        numbers,
+        [1, 2, 3, 5, 6, 8, 10, 11, 12],
+        "frame 10 follows 8: the retracted frame did not move the anchor to 20"
+    );
+    assert_eq!((rep.ok, rep.bad, rep.reanchored), (9, 1, 0));
+    let by: Vec<(&str, u64)> = rep.implausible_by_reason().filter(|r| r.1 > 0).collect();
+    assert_eq!(by, [("frame_number", 1), ("non_finite", 1)]);
+    assert_eq!(rep.implausible_total(), 2);
+}
