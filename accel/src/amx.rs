@@ -54,6 +54,15 @@ pub fn is_amx_kernel(name: &str) -> bool {
     name.starts_with("avx512amx_")
 }
 
+/// The widest B panel (`nr`) among the AMX int8 kernels `op` may run, `None` when it runs none.
+pub fn amx_nr(op: &OptMatMul) -> Option<usize> {
+    op.mmm
+        .iter()
+        .filter(|m| is_amx_kernel(m.name()))
+        .map(|m| m.nr())
+        .max()
+}
+
 /// Makes every B operand of an AMX int8 matmul in `model` safe to over-read (see the module
 /// docs). Values computed by the plan do not change.
 pub fn guard_amx(model: &mut TypedModel) -> TractResult<AmxGuard> {
@@ -64,13 +73,7 @@ pub fn guard_amx(model: &mut TypedModel) -> TractResult<AmxGuard> {
         let Some(op) = model.node(id).op_as::<OptMatMul>() else {
             continue;
         };
-        let Some(nr) = op
-            .mmm
-            .iter()
-            .filter(|m| is_amx_kernel(m.name()))
-            .map(|m| m.nr())
-            .max()
-        else {
+        let Some(nr) = amx_nr(op) else {
             continue;
         };
         report.amx_matmuls += 1;

@@ -32,7 +32,7 @@ mod amx;
 mod im2col;
 mod quantize;
 
-pub use amx::{guard_amx, is_amx_kernel, AmxGuard, PanelSlack};
+pub use amx::{amx_nr, guard_amx, is_amx_kernel, AmxGuard, PanelSlack};
 pub use im2col::{amx_tile_slack, PackedIm2Col};
 pub use quantize::{quantize_i8, FastQuantizeI8};
 use tract_onnx::prelude::*;

@@ -14,7 +14,7 @@
 // mmap/mprotect for the guard page, and tract's kernel API (unsafe by contract), in this test only.
 #![allow(unsafe_code)]
 
-use milliego_accel::{amx_tile_slack, guard_amx, is_amx_kernel, prepare};
+use milliego_accel::{amx_nr, amx_tile_slack, guard_amx, prepare};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use std::path::Path;
@@ -230,13 +230,7 @@ fn plan_child() {
             let Some(op) = node.op_as::<OptMatMul>() else {
                 continue;
             };
-            let Some(nr) = op
-                .mmm
-                .iter()
-                .filter(|k| is_amx_kernel(k.name()))
-                .map(|k| k.nr())
-                .max()
-            else {
+            let Some(nr) = amx_nr(op) else {
                 continue;
             };
             for spec in &op.micro_ops {
@@ -403,7 +397,7 @@ fn amx_b_operands(m: &TypedModel) -> usize {
     m.nodes()
         .iter()
         .filter_map(|n| n.op_as::<tract_onnx::tract_core::ops::matmul::optimized::OptMatMul>())
-        .filter(|op| op.mmm.iter().any(|k| is_amx_kernel(k.name())))
+        .filter(|op| amx_nr(op).is_some())
         .count()
 }
 
