@@ -62,7 +62,9 @@ fn simulate(dir: &Path, family: &str, motion: &str, seed: u64, duration: f64) {
 fn run(session: &Path, estimator: &str, model_file: Option<&str>, out: &Path) -> serde_json::Value {
     let summary = out.with_extension("json");
     let mut cmd = Command::new(BIN);
-    cmd.args(["run", "--session"])
+    // From the repository root, as a user runs it: `auto` then finds the shipped int8 model.
+    cmd.current_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join(".."))
+        .args(["run", "--session"])
         .arg(session)
         .args(["--estimator", estimator])
         .arg("--out")
@@ -99,6 +101,7 @@ fn every_estimator_runs_every_session_to_the_end() {
         ("imu", None),
     ];
     let mut total = 0;
+    let mut handovers = 0;
     for (family, motion, seed) in SESSIONS {
         let s = d.path().join(format!("{family}-{motion}-{seed}"));
         simulate(&s, family, motion, seed, duration);
@@ -106,6 +109,7 @@ fn every_estimator_runs_every_session_to_the_end() {
             .unwrap()
             .0
             .len() as u64;
+        let mut model_poses = None;
         for (estimator, file) in runs {
             let tag = format!(
                 "{family} {motion} {seed} {estimator} {}",
@@ -127,7 +131,7 @@ fn every_estimator_runs_every_session_to_the_end() {
             // A pose per expected frame: per frame after the 1 s levelling for the filters, per
             // 5-frame keyframe window for the model (20 Hz radar).
             let expected = match estimator {
-                "model" => (frames.saturating_sub(10)) / 5,
+                "model" | "auto" => (frames.saturating_sub(10)) / 5,
                 _ => frames.saturating_sub(25),
             };
             assert!(
@@ -135,6 +139,19 @@ fn every_estimator_runs_every_session_to_the_end() {
                 "{tag}: {radar_rate} poses for {frames} frames (expected at least {expected})"
             );
             assert_eq!(fo["resets"].as_u64(), Some(1), "{tag}: one origin only");
+            // `auto` runs the shipped int8 model unless it hands over (runs come in that order).
+            let h = fo["handovers"].as_u64().unwrap();
+            handovers += h;
+            match (estimator, file) {
+                ("auto", _) if h == 0 => model_poses = Some(radar_rate),
+                ("auto", _) => {}
+                ("model", Some("model-int8.onnx")) => {
+                    if let Some(auto) = model_poses {
+                        assert_eq!(auto, radar_rate, "{tag}: auto ran the int8 model");
+                    }
+                }
+                _ => assert_eq!(h, 0, "{tag}: hand-over in a fixed estimator"),
+            }
             let poses = read_tum(&out).unwrap();
             assert_eq!(poses.len() as u64, radar_rate, "{tag}");
             assert!(
@@ -147,7 +164,7 @@ fn every_estimator_runs_every_session_to_the_end() {
         }
     }
     println!(
-        "{total} runs over {} sessions of {duration} s: all exited 0",
+        "{total} runs over {} sessions of {duration} s: all exited 0 ({handovers} hand-overs in auto)",
         SESSIONS.len()
     );
 }
