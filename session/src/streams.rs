@@ -83,18 +83,9 @@ impl StreamReport {
     }
 }
 
-/// The plausibility limits a session's radar `.cfg` implies (the defaults without one).
-pub fn radar_limits(session: &Session) -> Result<Limits, SessionError> {
-    Ok(session
-        .radar_cfg()?
-        .and_then(|text| RadarConfig::parse(&text).ok())
-        .and_then(|c| c.derive(None).ok())
-        .map_or_else(Limits::default, |d| Limits::from_derived(&d)))
-}
-
 /// Decodes the radar stream: frames, point clouds (Doppler indices scaled with the session's .cfg
 /// when it has one), sensor time unwrapped with the .cfg's frame period. Every released frame goes
-/// through the plausibility [`RadarChecker`] with the .cfg's [`Limits`] (see [`radar_limits`]);
+/// through the plausibility [`RadarChecker`] with the .cfg's [`Limits`] ([`Limits::from_derived`]);
 /// rejected frames are left out and counted in [`StreamReport::implausible`]. The same checker, fed
 /// the same frames, runs in the runtime's live reader.
 pub fn radar_frames(session: &Session) -> Result<(Vec<RadarFrame>, StreamReport), SessionError> {
