@@ -147,6 +147,16 @@ impl<const N: usize> Framer<N> {
         self.buf.len() - self.release
     }
 
+    /// Whether the frame released last may still be taken back: its last bytes are the start of
+    /// a magic word, and the bytes that will show whether the next frame's magic continues them
+    /// ([`FrameError::OverlapsNextFrame`]) have not been polled yet. False for almost every frame
+    /// (a frame whose last byte is not one of the magic's first seven bytes is final at once), so
+    /// a consumer that must never publish a retracted frame holds only these few frames until
+    /// the next poll settles them.
+    pub fn may_retract(&self) -> bool {
+        self.check_tail && matches!(self.tail_check(&[]), TailCheck::NeedMore)
+    }
+
     /// The layout of the last good frame (auto mode), or the fixed layout.
     pub fn last_layout(&self) -> Option<Layout> {
         match self.scan.hint {

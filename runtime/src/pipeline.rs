@@ -13,6 +13,7 @@ use crate::stats::Histogram;
 use crate::sync::{SyncConfig, SyncOut, Synchroniser};
 use imu_driver::TimeWrap;
 use pose_link::Health;
+use radar_driver::host::DecoderConfig;
 use serde_json::json;
 use std::io::Read;
 use std::path::PathBuf;
@@ -201,8 +202,8 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
     // Everything that can fail at start-up fails here, with one message.
     let mut sinks = Vec::new();
     let mut session = None;
-    // What the radar .cfg lets the live reader's plausibility checker hold frames to.
-    let mut radar_limits = radar_driver::plausible::Limits::default();
+    // What the radar .cfg tells the live decoder (Doppler scale, frame period, plausibility).
+    let mut radar_decoding = DecoderConfig::default();
     match input {
         Input::Session { dir, .. } => {
             let s = milliego_session::Session::open(dir)
@@ -243,7 +244,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
                 cfg.classical.ego.sigma = dv.velocity_resolution_mps as f32 / 2.0;
                 cfg.sync.radar_period_s = Some(dv.frame_period_ms / 1e3);
                 cfg.sync.half_chirps_s = dv.active_frame_time_ms / 2e3;
-                radar_limits = radar_driver::plausible::Limits::from_derived(&dv);
+                radar_decoding = DecoderConfig::from_derived(Some(&dv));
             }
         }
     }
@@ -346,9 +347,6 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
             };
             imu_port = Some((port, src));
         }
-        let vres = cfg.classical.ego.sigma * 2.0;
-        let have_cfg = d.radar_cfg.is_some();
-        let period = cfg.sync.radar_period_s;
         let backoff = Duration::from_secs_f64(cfg.reopen_backoff_s);
         if let Some((port, mut src)) = radar_port {
             let sh2 = Arc::clone(&sh);
@@ -365,17 +363,16 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
                 std::thread::Builder::new()
                     .name("radar".into())
                     .spawn(move || {
-                        let mut decoder = RadarDecoder::new(have_cfg.then_some(vres), period)
-                            .with_limits(radar_limits);
+                        let mut decoder = RadarDecoder::new(radar_decoding);
                         let mut sink = radar_sink(&sh2.radar_q, &sh2.pool);
                         read_loop(&mut src, Some(port), &ctx, |b, host_s, ns, reopened| {
                             if reopened {
-                                decoder.resync();
+                                decoder.resync(&mut sink);
                             }
                             sh2.last_data_ns.store(ns, Ordering::Relaxed);
                             decoder.feed(b, host_s, ns, &mut sink);
                             decoder.publish(&stats);
-                            dec[0].store(decoder.frames, Ordering::Relaxed);
+                            dec[0].store(decoder.frames(), Ordering::Relaxed);
                         });
                     })
                     .map_err(|e| err(e.to_string()))?,
@@ -409,7 +406,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
                             decoder.feed(b, host_s, ns, |it| {
                                 sh2.imu_q.push(it);
                             });
-                            dec[1].store(decoder.samples, Ordering::Relaxed);
+                            dec[1].store(decoder.samples(), Ordering::Relaxed);
                         });
                     })
                     .map_err(|e| err(e.to_string()))?,
@@ -650,7 +647,8 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
                 .collect::<serde_json::Map<String, serde_json::Value>>(),
             "rejected_total": r.implausible_total(),
             "reanchored": r.reanchored,
-            "retracted_after_emit": 0,
+            "retracted": r.retracted,
+            "held": r.held,
         }),
         None => {
             let by: serde_json::Map<String, serde_json::Value> =
@@ -668,7 +666,8 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
                 "rejected": by,
                 "rejected_total": total,
                 "reanchored": radar_stats.reanchored.load(Ordering::Relaxed),
-                "retracted_after_emit": radar_stats.retracted_after_emit.load(Ordering::Relaxed),
+                "retracted": radar_stats.retracted.load(Ordering::Relaxed),
+                "held": radar_stats.held.load(Ordering::Relaxed),
             })
         }
     };

@@ -3,11 +3,10 @@
 //! that fails or disappears is reopened with backoff; readers never block on later stages.
 
 use crate::queue::{DropOldest, Pool};
-use imu_driver::{Checker, LogFramer, Message, TimeWrap};
-use radar_driver::clock::{cpu_clock_hz, CycleUnwrapper};
-use radar_driver::host::{Point, PointCloud};
-use radar_driver::plausible::{CheckCounters, Checker as RadarChecker, Limits, IMPLAUSIBLE_KINDS};
-use radar_driver::{FrameError, Framer, Poll, DEFAULT_MAX_FRAME};
+use imu_driver::host::ImuDecodeReport;
+use imu_driver::TimeWrap;
+use radar_driver::host::{DecodeReport, Decoded, Decoder, DecoderConfig, Point};
+use radar_driver::plausible::{CheckCounters, IMPLAUSIBLE_KINDS};
 use std::io::{self, Read};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -71,168 +70,110 @@ pub struct ImuItem {
     pub t: Option<f64>,
 }
 
-/// Radar framer, plausibility checker and decoder, reusing its buffers.
-///
-/// Each released frame goes through the [`RadarChecker`] before it is decoded and emitted (as in the
-/// offline [`milliego_session::streams::radar_frames`], with the same limits the same frames are
-/// rejected). A frame the framer retracts after it was emitted
-/// ([`FrameError::OverlapsNextFrame`]) cannot be taken back from the pipeline here (that would
-/// need the next frame's first bytes: a frame of latency), but the checker and the sensor clock
-/// forget it, so the frames after it are judged and stamped as offline.
+/// The live radar decoder: the drivers' streaming [`Decoder`] (framer, plausibility checker,
+/// sensor clock, retraction), the same that decodes sessions offline, filling recycled
+/// [`RadarItem`]s. The same bytes give the same frames as offline however the port chunks them;
+/// a frame that might still be retracted (its last bytes begin a magic word) is held until the
+/// bytes after it arrive, so no frame is published that the offline run drops.
 pub struct RadarDecoder {
-    framer: Box<Framer<DEFAULT_MAX_FRAME>>,
-    checker: RadarChecker,
-    clock: Option<CycleUnwrapper>,
-    clock_before: Option<CycleUnwrapper>,
-    period_s: Option<f64>,
-    vres: Option<f32>,
-    cloud: PointCloud,
-    /// Frames decoded (plausible ones: rejected frames are in [`RadarDecoder::plausibility`]).
-    pub frames: u64,
-    /// Emitted frames the framer retracted afterwards (they lost bytes on the wire).
-    pub retracted_after_emit: u64,
-    last_emitted: bool,
+    inner: Decoder<(f64, u64)>,
 }
 
 impl std::fmt::Debug for RadarDecoder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("RadarDecoder")
-            .field("frames", &self.frames)
+            .field("frames", &self.frames())
             .finish()
     }
 }
 
 impl RadarDecoder {
-    /// A decoder; `vres` scales SDK 1/2 Doppler indices \[m/s\], `period_s` helps unwrap the
-    /// cycle counter \[s\] (both from the `.cfg`).
-    pub fn new(vres: Option<f32>, period_s: Option<f64>) -> Self {
-        let mut cloud = PointCloud::default();
-        cloud.points.reserve(1024);
-        cloud.tlv_types.reserve(16);
+    /// A decoder with the settings the radar's `.cfg` implies ([`DecoderConfig::from_derived`]).
+    pub fn new(cfg: DecoderConfig) -> Self {
         RadarDecoder {
-            framer: Box::default(),
-            checker: RadarChecker::default(),
-            clock: None,
-            clock_before: None,
-            period_s,
-            vres,
-            cloud,
-            frames: 0,
-            retracted_after_emit: 0,
-            last_emitted: false,
+            inner: Decoder::new(cfg),
         }
     }
 
-    /// Holds frames to `limits` (from the `.cfg`: [`Limits::from_derived`]) instead of the
-    /// defaults.
-    pub fn with_limits(mut self, limits: Limits) -> Self {
-        self.checker = RadarChecker::new(limits);
-        self
+    /// Frames published (plausible and final).
+    pub fn frames(&self) -> u64 {
+        self.inner.report().published
+    }
+
+    /// Everything decoding counted so far (framer, plausibility, held frames).
+    pub fn report(&self) -> DecodeReport {
+        self.inner.report()
     }
 
     /// Bad frames and skipped bytes so far.
     pub fn counters(&self) -> &radar_driver::Counters {
-        self.framer.counters()
+        self.inner.framer_counters()
     }
 
     /// Plausibility verdicts so far (rejections by reason, re-anchors, retractions).
     pub fn plausibility(&self) -> &CheckCounters {
-        self.checker.counters()
+        self.inner.plausibility()
     }
 
     /// Copies the plausibility counters into the reader's shared counters.
     pub fn publish(&self, stats: &ReaderStats) {
-        let c = self.checker.counters();
-        for (a, v) in stats.implausible.iter().zip(c.rejected) {
+        let r = self.inner.report();
+        for (a, v) in stats.implausible.iter().zip(r.plausibility.rejected) {
             a.store(v, Ordering::Relaxed);
         }
-        stats.reanchored.store(c.reanchored, Ordering::Relaxed);
         stats
-            .retracted_after_emit
-            .store(self.retracted_after_emit, Ordering::Relaxed);
+            .reanchored
+            .store(r.plausibility.reanchored, Ordering::Relaxed);
+        stats
+            .retracted
+            .store(r.plausibility.retracted, Ordering::Relaxed);
+        stats.held.store(r.held, Ordering::Relaxed);
     }
 
     /// Feeds bytes read at `host_s` / `read_ns`; `emit` gets each frame, filled into `item`
-    /// (which it must hand on or give back).
+    /// (which it must hand on or give back). A frame is stamped with the read that completed it.
     pub fn feed(
         &mut self,
-        mut input: &[u8],
+        input: &[u8],
         host_s: f64,
         read_ns: u64,
         mut emit: impl FnMut(&mut dyn FnMut(&mut RadarItem)),
     ) {
-        loop {
-            match self.framer.poll(&mut input) {
-                Poll::Frame(f) => {
-                    self.last_emitted = false;
-                    if !self.checker.check(&f).is_accept() {
-                        continue;
-                    }
-                    let h = *f.header();
-                    let period = self.period_s;
-                    self.clock_before = self.clock;
-                    let sensor_s = h.time_cpu_cycles.and_then(|c| {
-                        self.clock
-                            .get_or_insert_with(|| CycleUnwrapper::new(cpu_clock_hz(&h), period))
-                            .push(h.frame_number, c)
-                            .seconds
-                    });
-                    self.cloud.decode_into(&f, self.vres);
-                    self.frames += 1;
-                    let bytes = f.as_bytes().len();
-                    let cloud = &self.cloud;
-                    emit(&mut |it: &mut RadarItem| {
-                        it.host_s = host_s;
-                        it.read_ns = read_ns;
-                        it.sensor_s = sensor_s;
-                        it.frame_number = h.frame_number;
-                        it.bytes = bytes;
-                        it.processing_s = cloud
-                            .stats
-                            .map_or(0.0, |s| f64::from(s.inter_frame_processing_time_us) * 1e-6);
-                        it.t = None;
-                        it.points.clear();
-                        it.points.extend_from_slice(&cloud.points);
-                    });
-                    self.last_emitted = true;
-                }
-                Poll::Dropped {
-                    error: FrameError::OverlapsNextFrame { .. },
-                    ..
-                } => {
-                    self.checker.retract();
-                    if self.last_emitted {
-                        self.clock = self.clock_before;
-                        self.retracted_after_emit += 1;
-                    }
-                    self.last_emitted = false;
-                }
-                Poll::Dropped { .. } => self.last_emitted = false,
-                Poll::NeedMore => break,
-            }
-        }
+        self.inner
+            .feed(input, (host_s, read_ns), |f| emit(&mut |it| fill(it, f)));
     }
 
-    /// Forgets a partial frame (after the port was reopened).
-    pub fn resync(&mut self) {
-        self.framer.finish();
+    /// Ends a stretch of the stream (the port was reopened): a held frame is published, a
+    /// partial one counted as dropped.
+    pub fn resync(&mut self, mut emit: impl FnMut(&mut dyn FnMut(&mut RadarItem))) {
+        self.inner.finish(|f| emit(&mut |it| fill(it, f)));
     }
 }
 
-/// Xbus framer and MTData2 decoder.
+fn fill(it: &mut RadarItem, f: &Decoded<'_, (f64, u64)>) {
+    (it.host_s, it.read_ns) = f.stamp;
+    it.sensor_s = f.sensor_s;
+    it.frame_number = f.frame_number;
+    it.bytes = f.bytes;
+    it.processing_s = f
+        .cloud
+        .stats
+        .map_or(0.0, |s| f64::from(s.inter_frame_processing_time_us) * 1e-6);
+    it.t = None;
+    it.points.clear();
+    it.points.extend_from_slice(&f.cloud.points);
+}
+
+/// The live IMU decoder: the drivers' streaming [`imu_driver::host::Decoder`], the same that
+/// decodes sessions offline, producing [`ImuItem`]s.
 pub struct ImuDecoder {
-    framer: Box<LogFramer>,
-    checker: Checker,
-    /// Samples decoded.
-    pub samples: u64,
-    /// Messages without acceleration, rate of turn and SampleTimeFine.
-    pub not_samples: u64,
+    inner: imu_driver::host::Decoder,
 }
 
 impl std::fmt::Debug for ImuDecoder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ImuDecoder")
-            .field("samples", &self.samples)
+            .field("samples", &self.samples())
             .finish()
     }
 }
@@ -241,55 +182,38 @@ impl ImuDecoder {
     /// A decoder for a device whose SampleTimeFine wraps as `wrap`.
     pub fn new(wrap: TimeWrap) -> Self {
         ImuDecoder {
-            framer: Box::new(LogFramer::new()),
-            checker: Checker::new(wrap),
-            samples: 0,
-            not_samples: 0,
+            inner: imu_driver::host::Decoder::new(wrap),
         }
     }
 
+    /// Samples decoded.
+    pub fn samples(&self) -> u64 {
+        self.inner.report().samples
+    }
+
+    /// Everything decoding counted so far.
+    pub fn report(&self) -> ImuDecodeReport {
+        self.inner.report()
+    }
+
     /// Feeds bytes; `emit` gets each sample.
-    pub fn feed(
-        &mut self,
-        mut input: &[u8],
-        host_s: f64,
-        read_ns: u64,
-        mut emit: impl FnMut(ImuItem),
-    ) {
-        loop {
-            match self.framer.poll(&mut input) {
-                imu_driver::Poll::Frame(f) => {
-                    let Ok(Message::MtData2(d)) = Message::decode(&f) else {
-                        self.not_samples += 1;
-                        continue;
-                    };
-                    let s = d.sample();
-                    let checked = self.checker.check(&s);
-                    match (s.acceleration, s.rate_of_turn, checked.time_ticks) {
-                        (Some(accel), Some(gyro), Some(ticks)) => {
-                            self.samples += 1;
-                            emit(ImuItem {
-                                host_s,
-                                read_ns,
-                                sensor_s: ticks as f64 * 1e-4,
-                                accel,
-                                gyro,
-                                bytes: f.as_bytes().len(),
-                                t: None,
-                            })
-                        }
-                        _ => self.not_samples += 1,
-                    }
-                }
-                imu_driver::Poll::Dropped { .. } => {}
-                imu_driver::Poll::NeedMore => break,
-            }
-        }
+    pub fn feed(&mut self, input: &[u8], host_s: f64, read_ns: u64, mut emit: impl FnMut(ImuItem)) {
+        self.inner.feed(input, (host_s, read_ns), |s| {
+            emit(ImuItem {
+                host_s: s.stamp.0,
+                read_ns: s.stamp.1,
+                sensor_s: s.sensor_s,
+                accel: s.accel,
+                gyro: s.gyro,
+                bytes: s.bytes,
+                t: None,
+            })
+        });
     }
 
     /// Forgets a partial message (after the port was reopened).
     pub fn resync(&mut self) {
-        self.framer.finish();
+        self.inner.finish();
     }
 }
 
@@ -341,8 +265,10 @@ pub struct ReaderStats {
     pub implausible: [AtomicU64; IMPLAUSIBLE_KINDS],
     /// Radar frames that confirmed a sensor restart or frame-number jump.
     pub reanchored: AtomicU64,
-    /// Radar frames emitted and then retracted by the framer (they lost bytes on the wire).
-    pub retracted_after_emit: AtomicU64,
+    /// Radar frames the framer retracted (they lost bytes on the wire); never published.
+    pub retracted: AtomicU64,
+    /// Radar frames held for the bytes after them (their last bytes began a magic word).
+    pub held: AtomicU64,
 }
 
 /// What a reader thread needs.
@@ -476,10 +402,10 @@ mod tests {
     }
 
     #[test]
-    fn the_live_decoder_rejects_counts_and_forgets_retracted_frames() {
+    fn the_live_decoder_rejects_counts_and_never_publishes_retracted_frames() {
         let bytes = stream();
         for chunk in [1usize, 7, 100, 4096] {
-            let mut dec = RadarDecoder::new(None, None).with_limits(Limits::default());
+            let mut dec = RadarDecoder::new(DecoderConfig::default());
             let mut seen = Vec::new();
             for c in bytes.chunks(chunk) {
                 dec.feed(c, 0.0, 0, |fill| {
@@ -488,24 +414,17 @@ mod tests {
                     seen.push(it.frame_number);
                 });
             }
-            // 20 was emitted before the framer could know it was short; 10 still follows 8.
-            assert_eq!(
-                seen,
-                [1, 2, 3, 5, 6, 8, 20, 10, 11, 12],
-                "chunks of {chunk}"
-            );
+            // 20 lost a byte: it is held until the next magic shows it short, then dropped.
+            assert_eq!(seen, [1, 2, 3, 5, 6, 8, 10, 11, 12], "chunks of {chunk}");
             let p = dec.plausibility();
             assert_eq!(p.rejected_total(), 2);
             assert_eq!(p.rejected[0], 1, "frame_number");
             assert_eq!(p.rejected[7], 1, "non_finite");
-            assert_eq!(
-                (p.retracted, dec.retracted_after_emit, dec.frames),
-                (1, 1, 10)
-            );
+            assert_eq!((p.retracted, dec.report().held, dec.frames()), (1, 1, 9));
             let stats = ReaderStats::default();
             dec.publish(&stats);
             assert_eq!(stats.implausible[0].load(Ordering::Relaxed), 1);
-            assert_eq!(stats.retracted_after_emit.load(Ordering::Relaxed), 1);
+            assert_eq!(stats.retracted.load(Ordering::Relaxed), 1);
         }
     }
 }

@@ -14,6 +14,7 @@ use milliego_session::Session;
 use milliego_sim::motion::MotionKind;
 use milliego_sim::scenario::{run as simulate, Scenario};
 use milliego_sim::world::Family;
+use radar_driver::host::DecoderConfig;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::RefCell;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -94,10 +95,7 @@ fn steady_state_allocates_nothing() {
         built,
     );
     let pool: Pool<RadarItem> = Pool::new(64, 64);
-    let mut rdec = RadarDecoder::new(
-        Some(d.velocity_resolution_mps as f32),
-        Some(d.frame_period_ms / 1e3),
-    );
+    let mut rdec = RadarDecoder::new(DecoderConfig::from_derived(Some(&d)));
     let mut idec = ImuDecoder::new(imu_driver::TimeWrap::Pow32);
     let mut enc = Encoded::default();
     let events: RefCell<Vec<SyncOut>> = RefCell::new(Vec::with_capacity(4096));
@@ -111,14 +109,14 @@ fn steady_state_allocates_nothing() {
         }
         let host_s = host_ns as f64 * 1e-9;
         if is_radar {
-            let before = rdec.frames;
+            let before = rdec.frames();
             rdec.feed(&rb[a..b], host_s, host_ns, |fill| {
                 let mut it = pool.take();
                 fill(&mut it);
                 sync.push_radar(it, |old| pool.give(old));
             });
             if COUNTING.load(Ordering::Relaxed) {
-                counted_frames += rdec.frames - before;
+                counted_frames += rdec.frames() - before;
             }
         } else {
             idec.feed(&ib[a..b], host_s, host_ns, |it| sync.push_imu(it));

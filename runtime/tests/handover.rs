@@ -16,6 +16,7 @@ use milliego_sim::scenario::{run as simulate, Scenario};
 use milliego_sim::world::Family;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use pose_link::{Health, PoseMessage};
+use radar_driver::host::DecoderConfig;
 use std::path::PathBuf;
 
 /// An estimator that fails from frame `at` on: the primary's fault, injected.
@@ -111,7 +112,11 @@ fn drive(s: &Sim, built: Built) -> (Vec<(f64, PoseMessage)>, StageCounters) {
         built,
     );
     let pool: Pool<RadarItem> = Pool::new(64, 64);
-    let mut rdec = RadarDecoder::new(Some(s.vres), Some(s.period_s));
+    let mut rdec = RadarDecoder::new(DecoderConfig {
+        velocity_resolution_mps: Some(s.vres),
+        frame_period_s: Some(s.period_s),
+        ..DecoderConfig::default()
+    });
     let mut idec = ImuDecoder::new(imu_driver::TimeWrap::Pow32);
     let mut events: Vec<SyncOut> = Vec::new();
     let mut poses = Vec::new();

@@ -2,17 +2,16 @@
 //! host time of the chunk that completed it (when the session has an index) and its sensor time.
 //! This is what offline runs, dataset export and evaluation read; nothing is dropped silently:
 //! [`StreamReport`] counts what the framers rejected and, for radar frames, what the plausibility
-//! checker ([`radar_driver::plausible`]) rejected, by reason.
+//! checker ([`radar_driver::plausible`]) rejected, by reason. The decoding is the drivers'
+//! streaming decoders ([`radar_driver::host::Decoder`], [`imu_driver::host::Decoder`]), the same
+//! the runtime's readers run live, fed the recorded chunks.
 
-use crate::{Session, SessionError, Stream};
-use imu_driver::{Checker, LogFramer, Message, TimeWrap};
+use crate::{Session, SessionError};
+use imu_driver::host::Decoder as ImuDecoder;
+use imu_driver::TimeWrap;
 use radar_driver::cfg::RadarConfig;
-use radar_driver::clock::{cpu_clock_hz, CycleUnwrapper};
-use radar_driver::host::PointCloud;
-use radar_driver::plausible::{
-    Checker as RadarChecker, Limits, IMPLAUSIBLE_KINDS, IMPLAUSIBLE_NAMES,
-};
-use radar_driver::{Framer, Poll, DEFAULT_MAX_FRAME};
+use radar_driver::host::{Decoded, Decoder, DecoderConfig, PointCloud};
+use radar_driver::plausible::{IMPLAUSIBLE_KINDS, IMPLAUSIBLE_NAMES};
 
 /// A decoded radar frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -66,6 +65,12 @@ pub struct StreamReport {
     /// Radar frames that confirmed a sensor restart or frame-number jump (the frame before them
     /// was rejected as `frame_number`, these were accepted).
     pub reanchored: u64,
+    /// Radar frames the framer retracted (they lost bytes on the wire and ended inside the next
+    /// frame's magic word); never published.
+    pub retracted: u64,
+    /// Radar frames held for the bytes after them before they were published or retracted
+    /// (their last bytes began a magic word).
+    pub held: u64,
 }
 
 impl StreamReport {
@@ -83,11 +88,11 @@ impl StreamReport {
     }
 }
 
-/// Decodes the radar stream: frames, point clouds (Doppler indices scaled with the session's .cfg
-/// when it has one), sensor time unwrapped with the .cfg's frame period. Every released frame goes
-/// through the plausibility [`RadarChecker`] with the .cfg's [`Limits`] ([`Limits::from_derived`]);
-/// rejected frames are left out and counted in [`StreamReport::implausible`]. The same checker, fed
-/// the same frames, runs in the runtime's live reader.
+/// Decodes the radar stream with the streaming [`Decoder`] the runtime's live reader runs, fed
+/// the recorded chunks: frames, point clouds (Doppler indices scaled with the session's .cfg when
+/// it has one), sensor time unwrapped with the .cfg's frame period, every frame held to the
+/// .cfg's plausibility [`radar_driver::plausible::Limits`], frames the framer retracts never
+/// published. Rejected frames are counted in [`StreamReport::implausible`].
 pub fn radar_frames(session: &Session) -> Result<(Vec<RadarFrame>, StreamReport), SessionError> {
     let Some(stream) = &session.radar else {
         return Ok((Vec::new(), StreamReport::default()));
@@ -96,83 +101,48 @@ pub fn radar_frames(session: &Session) -> Result<(Vec<RadarFrame>, StreamReport)
         .radar_cfg()?
         .and_then(|text| RadarConfig::parse(&text).ok())
         .and_then(|c| c.derive(None).ok());
-    let vres = derived.map(|d| d.velocity_resolution_mps as f32);
-    let period_s = derived.map(|d| d.frame_period_ms / 1e3);
-    let limits = derived.map_or_else(Limits::default, |d| Limits::from_derived(&d));
     let bytes = stream.read_all()?;
-    let mut framer: Box<Framer<DEFAULT_MAX_FRAME>> = Box::default();
-    let mut checker = RadarChecker::new(limits);
-    let mut clock: Option<CycleUnwrapper> = None;
-    // The clock before the last accepted frame, and whether that frame is the last in `out`: a
-    // retraction takes both back.
-    let mut clock_before: Option<CycleUnwrapper> = None;
-    let mut last_in_out = false;
+    let mut dec = Decoder::new(DecoderConfig::from_derived(derived.as_ref()));
     let mut out = Vec::new();
+    let mut keep = |f: &Decoded<'_, Option<f64>>| {
+        out.push(RadarFrame {
+            host_s: f.stamp,
+            sensor_s: f.sensor_s,
+            frame_number: f.frame_number,
+            bytes: f.bytes,
+            cloud: f.cloud.clone(),
+        })
+    };
     for chunk in stream.chunks() {
         let host_s = chunk.host_ns.map(|n| n as f64 * 1e-9);
-        let mut input = &bytes[chunk.start as usize..chunk.end as usize];
-        loop {
-            match framer.poll(&mut input) {
-                Poll::Frame(f) => {
-                    last_in_out = false;
-                    if !checker.check(&f).is_accept() {
-                        continue;
-                    }
-                    let h = *f.header();
-                    clock_before = clock;
-                    let sensor_s = h.time_cpu_cycles.and_then(|c| {
-                        clock
-                            .get_or_insert_with(|| CycleUnwrapper::new(cpu_clock_hz(&h), period_s))
-                            .push(h.frame_number, c)
-                            .seconds
-                    });
-                    out.push(RadarFrame {
-                        host_s,
-                        sensor_s,
-                        frame_number: h.frame_number,
-                        bytes: f.as_bytes().len(),
-                        cloud: PointCloud::from_frame(&f, vres),
-                    });
-                    last_in_out = true;
-                }
-                // The frame released just before lost bytes on the wire: take it back, and with
-                // it its effect on the continuity anchor and the clock.
-                Poll::Dropped {
-                    error: radar_driver::FrameError::OverlapsNextFrame { .. },
-                    ..
-                } => {
-                    checker.retract();
-                    if last_in_out {
-                        out.pop();
-                        clock = clock_before;
-                    }
-                    last_in_out = false;
-                }
-                Poll::Dropped { .. } => last_in_out = false,
-                Poll::NeedMore => break,
-            }
-        }
+        dec.feed(
+            &bytes[chunk.start as usize..chunk.end as usize],
+            host_s,
+            &mut keep,
+        );
     }
-    framer.finish();
-    let c = framer.counters();
-    let p = checker.counters();
+    dec.finish(&mut keep);
+    let r = dec.report();
+    let (c, p) = (r.framer, r.plausibility);
     debug_assert_eq!(c.frames_ok, p.accepted + p.rejected_total());
     Ok((
         out,
         StreamReport {
             bytes: c.bytes_in,
-            ok: p.accepted,
+            ok: r.published,
             bad: c.frames_bad_total(),
             bytes_skipped: c.bytes_skipped,
             not_samples: 0,
             implausible: p.rejected,
             reanchored: p.reanchored,
+            retracted: p.retracted,
+            held: r.held,
         },
     ))
 }
 
 /// Decodes the IMU stream into samples (messages carrying acceleration, rate of turn and
-/// SampleTimeFine).
+/// SampleTimeFine) with the streaming [`ImuDecoder`] the runtime's live reader runs.
 pub fn imu_samples(session: &Session) -> Result<(Vec<ImuSample>, StreamReport), SessionError> {
     let Some(stream) = &session.imu else {
         return Ok((Vec::new(), StreamReport::default()));
@@ -182,54 +152,39 @@ pub fn imu_samples(session: &Session) -> Result<(Vec<ImuSample>, StreamReport), 
         .imu
         .as_ref()
         .map_or(TimeWrap::Pow32, |m| m.time_wrap());
-    decode_imu(stream, wrap)
-}
-
-fn decode_imu(
-    stream: &Stream,
-    wrap: TimeWrap,
-) -> Result<(Vec<ImuSample>, StreamReport), SessionError> {
     let bytes = stream.read_all()?;
-    let mut framer: Box<LogFramer> = Box::new(LogFramer::new());
-    let mut checker = Checker::new(wrap);
+    let mut dec = ImuDecoder::new(wrap);
     let mut out = Vec::new();
-    let mut rep = StreamReport::default();
     for chunk in stream.chunks() {
         let host_s = chunk.host_ns.map(|n| n as f64 * 1e-9);
-        let mut input = &bytes[chunk.start as usize..chunk.end as usize];
-        loop {
-            match framer.poll(&mut input) {
-                imu_driver::Poll::Frame(f) => {
-                    let Ok(Message::MtData2(d)) = Message::decode(&f) else {
-                        rep.not_samples += 1;
-                        continue;
-                    };
-                    let s = d.sample();
-                    let checked = checker.check(&s);
-                    match (s.acceleration, s.rate_of_turn, checked.time_ticks) {
-                        (Some(accel), Some(gyro), Some(ticks)) => out.push(ImuSample {
-                            host_s,
-                            sensor_s: ticks as f64 * 1e-4,
-                            accel,
-                            gyro,
-                            packet_counter: s.packet_counter,
-                            bytes: f.as_bytes().len(),
-                        }),
-                        _ => rep.not_samples += 1,
-                    }
-                }
-                imu_driver::Poll::Dropped { .. } => {}
-                imu_driver::Poll::NeedMore => break,
-            }
-        }
+        dec.feed(
+            &bytes[chunk.start as usize..chunk.end as usize],
+            host_s,
+            |s| {
+                out.push(ImuSample {
+                    host_s: s.stamp,
+                    sensor_s: s.sensor_s,
+                    accel: s.accel,
+                    gyro: s.gyro,
+                    packet_counter: s.packet_counter,
+                    bytes: s.bytes,
+                })
+            },
+        );
     }
-    framer.finish();
-    let c = framer.counters();
-    rep.bytes = c.bytes_in;
-    rep.ok = c.frames_ok;
-    rep.bad = c.frames_bad.checksum + c.frames_bad.length + c.frames_bad.truncated;
-    rep.bytes_skipped = c.bytes_skipped;
-    Ok((out, rep))
+    dec.finish();
+    let r = dec.report();
+    Ok((
+        out,
+        StreamReport {
+            bytes: r.framer.bytes_in,
+            ok: r.framer.frames_ok,
+            bad: r.framer.frames_bad.total(),
+            bytes_skipped: r.framer.bytes_skipped,
+            not_samples: r.not_samples,
+            ..StreamReport::default()
+        },
+    ))
 }
 
 /// A linear map from a sensor clock to the host clock, `host = offset + rate * sensor`, fitted to
