@@ -1,17 +1,18 @@
 //! The threads and their wiring: readers (or the offline feeder) -> synchroniser -> estimator
 //! stage -> output, joined by [`DropOldest`] queues; the summary at the end.
 
-use crate::estimator::{build_run_estimators, ClassicalConfig, EstimatorKind};
+use crate::estimator::{build_run_estimators, Built, ClassicalConfig, EstimatorKind};
 use crate::output::{Encoded, OutputSpec, Sink};
 use crate::queue::{DropOldest, Pool};
 use crate::reader::{
     radar_sink, read_loop, ImuDecoder, ImuItem, RadarDecoder, RadarItem, ReaderCtx, ReaderStats,
     SerialSource, Source,
 };
-use crate::stage::{PoseOut, Stage, StageConfig};
+use crate::stage::{PoseOut, Stage, StageConfig, StageCounters};
 use crate::stats::Histogram;
-use crate::sync::{SyncConfig, SyncOut, Synchroniser};
+use crate::sync::{SyncConfig, SyncCounters, SyncOut, Synchroniser};
 use imu_driver::TimeWrap;
+use milliego_session::streams::StreamReport;
 use pose_link::Health;
 use radar_driver::host::DecoderConfig;
 use serde_json::json;
@@ -160,6 +161,8 @@ struct Shared {
     pose_q: DropOldest<PoseOut>,
     pool: Pool<RadarItem>,
     stop: Arc<AtomicBool>,
+    /// A session run: queues between stages wait instead of dropping.
+    offline: bool,
     inputs_done: AtomicBool,
     sync_done: AtomicBool,
     stage_done: AtomicBool,
@@ -196,68 +199,108 @@ fn radar_derived(text: &str) -> Result<radar_driver::cfg::Derived, String> {
         .map_err(|e| format!("{e}"))
 }
 
+/// Everything a run needs, derived once from the input and the settings before any thread
+/// starts: a missing device, a bad `.cfg` or an unusable model stops the run here, with one
+/// message.
+struct Plan {
+    /// The settings, completed from the session or the `.cfg` (mounting, Doppler noise, clock).
+    cfg: RunConfig,
+    /// The session, for offline runs.
+    session: Option<milliego_session::Session>,
+    /// What the radar `.cfg` tells the live decoder (Doppler scale, frame period, plausibility).
+    radar_decoding: DecoderConfig,
+    /// The estimators.
+    built: Built,
+    /// The outputs, open.
+    sinks: Vec<Sink>,
+}
+
+impl Plan {
+    fn derive(input: &Input, cfg: &RunConfig) -> Result<Plan, RunError> {
+        let mut cfg = cfg.clone();
+        let mut session = None;
+        let mut radar_decoding = DecoderConfig::default();
+        let mut apply_cfg = |cfg: &mut RunConfig, d: &radar_driver::cfg::Derived| {
+            cfg.classical.ego.sigma = d.velocity_resolution_mps as f32 / 2.0;
+            cfg.sync.radar_period_s = Some(d.frame_period_ms / 1e3);
+            cfg.sync.half_chirps_s = d.active_frame_time_ms / 2e3;
+            radar_decoding = DecoderConfig::from_derived(Some(d));
+        };
+        match input {
+            Input::Session { dir, .. } => {
+                let s = milliego_session::Session::open(dir)
+                    .map_err(|e| err(format!("session {}: {e}", dir.display())))?;
+                cfg.classical.mounting =
+                    crate::estimator::Mounting::from_session(&s.meta.extrinsics);
+                if let Some(d) = s
+                    .radar_cfg()
+                    .map_err(|e| err(e.to_string()))?
+                    .and_then(|t| radar_derived(&t).ok())
+                {
+                    apply_cfg(&mut cfg, &d);
+                }
+                if let Some(r) = &s.meta.radar {
+                    cfg.sync.radar_baud = r.baud;
+                }
+                if let Some(i) = &s.meta.imu {
+                    cfg.sync.imu_baud = i.baud;
+                }
+                cfg.sync.radar_enabled = s.radar.is_some();
+                cfg.sync.imu_enabled = s.imu.is_some();
+                session = Some(s);
+            }
+            Input::Devices(d) => {
+                if d.radar_data.is_none() && d.imu.is_none() {
+                    return Err(err("no sensor given: --radar-data and/or --imu"));
+                }
+                cfg.sync.radar_enabled = d.radar_data.is_some();
+                cfg.sync.imu_enabled = d.imu.is_some();
+                cfg.sync.radar_baud = d.radar_baud;
+                cfg.sync.imu_baud = d.imu_baud;
+                if let Some(p) = &d.radar_cfg {
+                    let text = std::fs::read_to_string(p)
+                        .map_err(|e| err(format!("radar .cfg {}: {e}", p.display())))?;
+                    let dv = radar_derived(&text)
+                        .map_err(|e| err(format!("radar .cfg {}: {e}", p.display())))?;
+                    apply_cfg(&mut cfg, &dv);
+                }
+            }
+        }
+        let built = build_run_estimators(cfg.estimator, &cfg.classical, cfg.model.as_deref())
+            .map_err(|e| err(e.to_string()))?;
+        if built.model_fallback {
+            tracing::warn!("learned model unavailable: auto runs Doppler (MODEL_FALLBACK)");
+        }
+        let sinks = cfg
+            .outputs
+            .iter()
+            .map(|o| Sink::open(o, cfg.tum_predicted).map_err(err))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Plan {
+            cfg,
+            session,
+            radar_decoding,
+            built,
+            sinks,
+        })
+    }
+}
+
+/// Counters the input threads keep for the summary.
+#[derive(Debug, Default)]
+struct InputCounters {
+    radar: Arc<ReaderStats>,
+    imu: Arc<ReaderStats>,
+    /// Radar frames and IMU samples decoded.
+    decoded: Arc<[AtomicU64; 2]>,
+}
+
 /// Runs the pipeline until the input ends, `stop` is set, or a limit is reached.
 pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summary, RunError> {
-    let mut cfg = cfg.clone();
-    // Everything that can fail at start-up fails here, with one message.
-    let mut sinks = Vec::new();
-    let mut session = None;
-    // What the radar .cfg tells the live decoder (Doppler scale, frame period, plausibility).
-    let mut radar_decoding = DecoderConfig::default();
-    match input {
-        Input::Session { dir, .. } => {
-            let s = milliego_session::Session::open(dir)
-                .map_err(|e| err(format!("session {}: {e}", dir.display())))?;
-            cfg.classical.mounting = crate::estimator::Mounting::from_session(&s.meta.extrinsics);
-            if let Some(d) = s
-                .radar_cfg()
-                .map_err(|e| err(e.to_string()))?
-                .and_then(|t| radar_derived(&t).ok())
-            {
-                cfg.classical.ego.sigma = d.velocity_resolution_mps as f32 / 2.0;
-                cfg.sync.radar_period_s = Some(d.frame_period_ms / 1e3);
-                cfg.sync.half_chirps_s = d.active_frame_time_ms / 2e3;
-            }
-            if let Some(r) = &s.meta.radar {
-                cfg.sync.radar_baud = r.baud;
-            }
-            if let Some(i) = &s.meta.imu {
-                cfg.sync.imu_baud = i.baud;
-            }
-            cfg.sync.radar_enabled = s.radar.is_some();
-            cfg.sync.imu_enabled = s.imu.is_some();
-            session = Some(s);
-        }
-        Input::Devices(d) => {
-            if d.radar_data.is_none() && d.imu.is_none() {
-                return Err(err("no sensor given: --radar-data and/or --imu"));
-            }
-            cfg.sync.radar_enabled = d.radar_data.is_some();
-            cfg.sync.imu_enabled = d.imu.is_some();
-            cfg.sync.radar_baud = d.radar_baud;
-            cfg.sync.imu_baud = d.imu_baud;
-            if let Some(p) = &d.radar_cfg {
-                let text = std::fs::read_to_string(p)
-                    .map_err(|e| err(format!("radar .cfg {}: {e}", p.display())))?;
-                let dv = radar_derived(&text)
-                    .map_err(|e| err(format!("radar .cfg {}: {e}", p.display())))?;
-                cfg.classical.ego.sigma = dv.velocity_resolution_mps as f32 / 2.0;
-                cfg.sync.radar_period_s = Some(dv.frame_period_ms / 1e3);
-                cfg.sync.half_chirps_s = dv.active_frame_time_ms / 2e3;
-                radar_decoding = DecoderConfig::from_derived(Some(&dv));
-            }
-        }
-    }
-    let built = build_run_estimators(cfg.estimator, &cfg.classical, cfg.model.as_deref())
-        .map_err(|e| err(e.to_string()))?;
-    if built.model_fallback {
-        tracing::warn!("learned model unavailable: auto runs Doppler (MODEL_FALLBACK)");
-    }
-    for o in &cfg.outputs {
-        sinks.push(Sink::open(o, cfg.tum_predicted).map_err(err)?);
-    }
-
+    let plan = Plan::derive(input, cfg)?;
+    let cfg = plan.cfg;
     let [qr, qi, qe, qp] = cfg.queues;
+    let offline = plan.session.is_some();
     let sh = Arc::new(Shared {
         radar_q: DropOldest::new(qr),
         imu_q: DropOldest::new(qi),
@@ -265,6 +308,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         pose_q: DropOldest::new(qp),
         pool: Pool::new(qr + 64, qr + 32),
         stop: Arc::clone(&stop),
+        offline,
         inputs_done: AtomicBool::new(false),
         sync_done: AtomicBool::new(false),
         stage_done: AtomicBool::new(false),
@@ -273,237 +317,334 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         last_data_ns: AtomicU64::new(0),
         watermark: AtomicU64::new(f64::NEG_INFINITY.to_bits()),
     });
-    let offline = session.is_some();
-
-    // Inputs.
-    let mut input_threads = Vec::new();
-    let radar_stats = Arc::new(ReaderStats::default());
-    let imu_stats = Arc::new(ReaderStats::default());
-    let decoded = Arc::new([AtomicU64::new(0), AtomicU64::new(0)]);
+    let counters = InputCounters::default();
     // The radar plausibility verdicts: the session decoder's report, or the live reader's counters.
     let mut session_radar_report = None;
-    if let Some(s) = session {
+    let mut input_threads = Vec::new();
+    if let Some(s) = plan.session {
         let realtime = matches!(input, Input::Session { realtime: true, .. });
-        let sh2 = Arc::clone(&sh);
-        let dec = Arc::clone(&decoded);
-        let (frames, radar_rep) =
-            milliego_session::streams::radar_frames(&s).map_err(|e| err(e.to_string()))?;
-        session_radar_report = Some(radar_rep);
-        let (imu, _) =
-            milliego_session::streams::imu_samples(&s).map_err(|e| err(e.to_string()))?;
-        if imu.is_empty() && frames.is_empty() {
-            return Err(err("the session has neither radar frames nor IMU samples"));
-        }
-        let clock = milliego_session::streams::SessionClock::fit(&s, &frames, &imu)
-            .map_err(|e| err(e.to_string()))?;
-        let online_clock = cfg.session_online_clock;
-        input_threads.push(
-            std::thread::Builder::new()
-                .name("feeder".into())
-                .spawn(move || {
-                    feed_session(&sh2, &frames, &imu, &clock, realtime, online_clock, &dec);
-                })
-                .map_err(|e| err(e.to_string()))?,
-        );
+        let (t, report) = start_session(&sh, &s, realtime, cfg.session_online_clock, &counters)?;
+        session_radar_report = Some(report);
+        input_threads.push(t);
     } else if let Input::Devices(d) = input {
-        // Open (and configure) everything before any thread starts: a missing device stops here.
-        let mut radar_port = None;
-        if let Some(p) = &d.radar_data {
-            if d.configure {
-                if let (Some(cli), Some(cfgp)) = (&d.radar_cli, &d.radar_cfg) {
-                    let text = std::fs::read_to_string(cfgp)
-                        .map_err(|e| err(format!("radar .cfg {}: {e}", cfgp.display())))?;
-                    let port = radar_driver::host::cli_port::open_serial(cli, 115_200)
-                        .map_err(|e| err(format!("radar CLI port {cli}: {e}")))?;
-                    let mut c = radar_driver::host::CliPort::new(port, Duration::from_secs(2));
-                    c.upload(&text)
-                        .map_err(|e| err(format!("radar configuration over {cli}: {e}")))?;
-                }
-            }
-            let mut src = SerialSource {
-                path: p.clone(),
-                baud: d.radar_baud,
-            };
-            radar_port = Some((
-                src.open()
-                    .map_err(|e| err(format!("radar data port {p}: {e}")))?,
-                src,
-            ));
-        }
-        let mut imu_port = None;
-        if let Some(p) = &d.imu {
-            let mut src = SerialSource {
-                path: p.clone(),
-                baud: d.imu_baud,
-            };
-            let port: Box<dyn Read + Send> = if d.configure {
-                let mut dev = imu_driver::host::Device::open(p, d.imu_baud)
-                    .map_err(|e| err(format!("IMU port {p}: {e}")))?;
-                dev.go_to_measurement()
-                    .map_err(|e| err(format!("IMU {p}: going to measurement: {e}")))?;
-                Box::new(dev.into_reader().into_inner())
-            } else {
-                src.open().map_err(|e| err(format!("IMU port {p}: {e}")))?
-            };
-            imu_port = Some((port, src));
-        }
+        let (radar, imu) = open_devices(d)?;
         let backoff = Duration::from_secs_f64(cfg.reopen_backoff_s);
-        if let Some((port, mut src)) = radar_port {
-            let sh2 = Arc::clone(&sh);
-            let ctx = ReaderCtx {
-                epoch: sh.epoch,
-                stop: Arc::clone(&stop),
-                stats: Arc::clone(&radar_stats),
+        if let Some((port, src)) = radar {
+            input_threads.push(spawn_radar_reader(
+                &sh,
+                port,
+                src,
+                plan.radar_decoding,
                 backoff,
-                max_backoff: Duration::from_secs(1),
-            };
-            let dec = Arc::clone(&decoded);
-            let stats = Arc::clone(&radar_stats);
-            input_threads.push(
-                std::thread::Builder::new()
-                    .name("radar".into())
-                    .spawn(move || {
-                        let mut decoder = RadarDecoder::new(radar_decoding);
-                        let mut sink = radar_sink(&sh2.radar_q, &sh2.pool);
-                        read_loop(&mut src, Some(port), &ctx, |b, host_s, ns, reopened| {
-                            if reopened {
-                                decoder.resync(&mut sink);
-                            }
-                            sh2.last_data_ns.store(ns, Ordering::Relaxed);
-                            decoder.feed(b, host_s, ns, &mut sink);
-                            decoder.publish(&stats);
-                            dec[0].store(decoder.frames(), Ordering::Relaxed);
-                        });
-                    })
-                    .map_err(|e| err(e.to_string()))?,
-            );
+                &counters,
+            )?);
         }
-        if let Some((port, mut src)) = imu_port {
-            let sh2 = Arc::clone(&sh);
-            let ctx = ReaderCtx {
-                epoch: sh.epoch,
-                stop: Arc::clone(&stop),
-                stats: Arc::clone(&imu_stats),
-                backoff,
-                max_backoff: Duration::from_secs(1),
-            };
+        if let Some((port, src)) = imu {
             let wrap = if d.imu_wrap_day {
                 TimeWrap::Day
             } else {
                 TimeWrap::Pow32
             };
-            let dec = Arc::clone(&decoded);
-            input_threads.push(
-                std::thread::Builder::new()
-                    .name("imu".into())
-                    .spawn(move || {
-                        let mut decoder = ImuDecoder::new(wrap);
-                        read_loop(&mut src, Some(port), &ctx, |b, host_s, ns, reopened| {
-                            if reopened {
-                                decoder.resync();
-                            }
-                            sh2.last_data_ns.store(ns, Ordering::Relaxed);
-                            decoder.feed(b, host_s, ns, |it| {
-                                sh2.imu_q.push(it);
-                            });
-                            dec[1].store(decoder.samples(), Ordering::Relaxed);
-                        });
-                    })
-                    .map_err(|e| err(e.to_string()))?,
-            );
+            input_threads.push(spawn_imu_reader(&sh, port, src, wrap, backoff, &counters)?);
         }
     }
-
-    // Synchroniser.
     let sync_cfg = SyncConfig {
         preview_imu: cfg.imu_rate_output,
         ..cfg.sync
     };
-    let session_online_clock = cfg.session_online_clock;
-    let sh2 = Arc::clone(&sh);
-    let sync_thread = std::thread::Builder::new().name("sync".into()).spawn(move || {
-        let mut sync = Synchroniser::new(sync_cfg);
-        sync.offline_clock = offline && !session_online_clock;
-        sync.data_time = offline;
-        let mut hist = Histogram::default();
-        let mut data_now = f64::NEG_INFINITY;
-        loop {
-            let done = sh2.inputs_done.load(Ordering::Acquire);
-            let watermark = f64::from_bits(sh2.watermark.load(Ordering::Acquire));
-            let mut any = false;
-            // IMU first: a radar frame pushed before these samples is then visible below.
-            // Bounded batches: a fast producer must not keep one drain going while the other
-            // queue fills.
-            for _ in 0..sh2.imu_q.len() {
-                let Some(s) = sh2.imu_q.pop() else { break };
-                data_now = data_now.max(s.host_s);
-                sync.push_imu(s);
-                any = true;
-            }
-            for _ in 0..sh2.radar_q.len() {
-                let Some(r) = sh2.radar_q.pop() else { break };
-                data_now = data_now.max(r.host_s);
-                sync.push_radar(r, |b| sh2.pool.give(b));
-                any = true;
-            }
-            let now = if offline { watermark } else { sh2.epoch.elapsed().as_secs_f64() };
-            let emit = |ev: SyncOut| {
-                let read_ns = match &ev {
-                    SyncOut::Imu { read_ns, .. } => Some(*read_ns),
-                    SyncOut::Preview { .. } => None,
-                    SyncOut::Radar { item, .. } => Some(item.read_ns),
-                    SyncOut::Tick { .. } => None,
-                };
-                if let Some(r) = read_ns {
-                    hist.record(sh2.now_ns().saturating_sub(r));
-                }
-                if offline {
-                    let mut ev = ev;
-                    while let Err(back) = sh2.ev_q.try_push(ev) {
-                        ev = back;
-                        std::thread::sleep(Duration::from_micros(50));
-                    }
-                } else if let Some(old) = sh2.ev_q.push(ev) {
-                    recycle(&sh2, old);
-                }
-            };
-            if now.is_finite() {
-                sync.poll(now, emit);
-            }
-            if done && sh2.imu_q.is_empty() && sh2.radar_q.is_empty() {
-                let emit = |ev: SyncOut| {
-                    let mut ev = ev;
-                    while let Err(back) = sh2.ev_q.try_push(ev) {
-                        ev = back;
-                        std::thread::sleep(Duration::from_micros(50));
-                    }
-                };
-                sync.flush(emit);
-                break;
-            }
-            sh2.sync_dropped
-                .store(sync.counters.dropped, Ordering::Relaxed);
-            if !any {
-                std::thread::sleep(Duration::from_micros(200));
-            }
-        }
-        sh2.sync_dropped.store(sync.counters.dropped, Ordering::Relaxed);
-        sh2.sync_done.store(true, Ordering::Release);
-        let clocks = json!({
-            "radar": sync.radar_clock.map().map(|(o, r)| json!({"offset_s": o, "rate": r, "accepted": sync.radar_clock.accepted, "rejected_late": sync.radar_clock.rejected_late})),
-            "imu": sync.imu_clock.map().map(|(o, r)| json!({"offset_s": o, "rate": r, "accepted": sync.imu_clock.accepted, "rejected_late": sync.imu_clock.rejected_late})),
-            "offline_fit": offline,
-        });
-        (hist, sync.counters, clocks)
-    }).map_err(|e| err(e.to_string()))?;
-
-    // Estimator stage.
+    let sync_thread = spawn_sync(&sh, sync_cfg, cfg.session_online_clock)?;
     let stage_cfg = StageConfig {
         imu_rate_output: cfg.imu_rate_output,
         mounting: cfg.classical.mounting,
     };
-    let sh2 = Arc::clone(&sh);
-    let stage_thread = std::thread::Builder::new()
+    let stage_thread = spawn_stage(&sh, stage_cfg, plan.built)?;
+    let out_thread = spawn_output(&sh, plan.sinks)?;
+
+    let started = Instant::now();
+    supervise(&sh, &cfg, &stop, input_threads, started);
+    sh.inputs_done.store(true, Ordering::Release);
+    let (h_sync, sync_counters, clocks) = sync_thread
+        .join()
+        .map_err(|_| err("sync thread panicked"))?;
+    let (h_est, stage_counters) = stage_thread
+        .join()
+        .map_err(|_| err("estimator thread panicked"))?;
+    let out = out_thread
+        .join()
+        .map_err(|_| err("output thread panicked"))?;
+    let wall_s = started.elapsed().as_secs_f64();
+    let latency = Latencies {
+        sync: h_sync,
+        estimate: h_est,
+        output: out.output.clone(),
+        end_to_end: out.end_to_end.clone(),
+        imu_to_pose: out.imu_to_pose.clone(),
+    };
+    let ends = RunEnds {
+        estimator: cfg.estimator,
+        offline,
+        wall_s,
+        sync: sync_counters,
+        clocks,
+        stage: stage_counters,
+        out: &out,
+        radar_report: session_radar_report.as_ref(),
+    };
+    let json = summary_json(&ends, &sh, &counters, &latency);
+    Ok(Summary {
+        json,
+        latency,
+        poses_sent: u64::from(out.sent),
+        radar_poses: out.radar_poses,
+        dropped_total: sh.dropped(),
+        wall_s,
+    })
+}
+
+/// Decodes the session with the drivers' streaming decoders and starts the feeder thread, which
+/// pushes the decoded streams on the session clock.
+fn start_session(
+    sh: &Arc<Shared>,
+    s: &milliego_session::Session,
+    realtime: bool,
+    online_clock: bool,
+    counters: &InputCounters,
+) -> Result<(std::thread::JoinHandle<()>, StreamReport), RunError> {
+    let (frames, radar_rep) =
+        milliego_session::streams::radar_frames(s).map_err(|e| err(e.to_string()))?;
+    let (imu, _) = milliego_session::streams::imu_samples(s).map_err(|e| err(e.to_string()))?;
+    if imu.is_empty() && frames.is_empty() {
+        return Err(err("the session has neither radar frames nor IMU samples"));
+    }
+    let clock = milliego_session::streams::SessionClock::fit(s, &frames, &imu)
+        .map_err(|e| err(e.to_string()))?;
+    let sh2 = Arc::clone(sh);
+    let dec = Arc::clone(&counters.decoded);
+    let t = std::thread::Builder::new()
+        .name("feeder".into())
+        .spawn(move || {
+            feed_session(&sh2, &frames, &imu, &clock, realtime, online_clock, &dec);
+        })
+        .map_err(|e| err(e.to_string()))?;
+    Ok((t, radar_rep))
+}
+
+/// An open port and how to reopen it.
+type OpenPort = (Box<dyn Read + Send>, SerialSource);
+
+/// Opens (and, with `configure`, configures) the devices before any thread starts: a missing
+/// device stops the run here.
+fn open_devices(d: &Devices) -> Result<(Option<OpenPort>, Option<OpenPort>), RunError> {
+    let mut radar_port = None;
+    if let Some(p) = &d.radar_data {
+        if d.configure {
+            if let (Some(cli), Some(cfgp)) = (&d.radar_cli, &d.radar_cfg) {
+                let text = std::fs::read_to_string(cfgp)
+                    .map_err(|e| err(format!("radar .cfg {}: {e}", cfgp.display())))?;
+                let port = radar_driver::host::cli_port::open_serial(cli, 115_200)
+                    .map_err(|e| err(format!("radar CLI port {cli}: {e}")))?;
+                let mut c = radar_driver::host::CliPort::new(port, Duration::from_secs(2));
+                c.upload(&text)
+                    .map_err(|e| err(format!("radar configuration over {cli}: {e}")))?;
+            }
+        }
+        let mut src = SerialSource {
+            path: p.clone(),
+            baud: d.radar_baud,
+        };
+        let port = src
+            .open()
+            .map_err(|e| err(format!("radar data port {p}: {e}")))?;
+        radar_port = Some((port, src));
+    }
+    let mut imu_port = None;
+    if let Some(p) = &d.imu {
+        let mut src = SerialSource {
+            path: p.clone(),
+            baud: d.imu_baud,
+        };
+        let port: Box<dyn Read + Send> = if d.configure {
+            let mut dev = imu_driver::host::Device::open(p, d.imu_baud)
+                .map_err(|e| err(format!("IMU port {p}: {e}")))?;
+            dev.go_to_measurement()
+                .map_err(|e| err(format!("IMU {p}: going to measurement: {e}")))?;
+            Box::new(dev.into_reader().into_inner())
+        } else {
+            src.open().map_err(|e| err(format!("IMU port {p}: {e}")))?
+        };
+        imu_port = Some((port, src));
+    }
+    Ok((radar_port, imu_port))
+}
+
+fn reader_ctx(sh: &Shared, stats: &Arc<ReaderStats>, backoff: Duration) -> ReaderCtx {
+    ReaderCtx {
+        epoch: sh.epoch,
+        stop: Arc::clone(&sh.stop),
+        stats: Arc::clone(stats),
+        backoff,
+        max_backoff: Duration::from_secs(1),
+    }
+}
+
+/// The radar reader thread: port -> [`RadarDecoder`] -> radar queue (drop-oldest).
+fn spawn_radar_reader(
+    sh: &Arc<Shared>,
+    port: Box<dyn Read + Send>,
+    mut src: SerialSource,
+    decoding: DecoderConfig,
+    backoff: Duration,
+    counters: &InputCounters,
+) -> Result<std::thread::JoinHandle<()>, RunError> {
+    let sh2 = Arc::clone(sh);
+    let ctx = reader_ctx(sh, &counters.radar, backoff);
+    let dec = Arc::clone(&counters.decoded);
+    let stats = Arc::clone(&counters.radar);
+    std::thread::Builder::new()
+        .name("radar".into())
+        .spawn(move || {
+            let mut decoder = RadarDecoder::new(decoding);
+            let mut sink = radar_sink(&sh2.radar_q, &sh2.pool);
+            read_loop(&mut src, Some(port), &ctx, |b, host_s, ns, reopened| {
+                if reopened {
+                    decoder.resync(&mut sink);
+                }
+                sh2.last_data_ns.store(ns, Ordering::Relaxed);
+                decoder.feed(b, host_s, ns, &mut sink);
+                decoder.publish(&stats);
+                dec[0].store(decoder.frames(), Ordering::Relaxed);
+            });
+        })
+        .map_err(|e| err(e.to_string()))
+}
+
+/// The IMU reader thread: port -> [`ImuDecoder`] -> IMU queue (drop-oldest).
+fn spawn_imu_reader(
+    sh: &Arc<Shared>,
+    port: Box<dyn Read + Send>,
+    mut src: SerialSource,
+    wrap: TimeWrap,
+    backoff: Duration,
+    counters: &InputCounters,
+) -> Result<std::thread::JoinHandle<()>, RunError> {
+    let sh2 = Arc::clone(sh);
+    let ctx = reader_ctx(sh, &counters.imu, backoff);
+    let dec = Arc::clone(&counters.decoded);
+    std::thread::Builder::new()
+        .name("imu".into())
+        .spawn(move || {
+            let mut decoder = ImuDecoder::new(wrap);
+            read_loop(&mut src, Some(port), &ctx, |b, host_s, ns, reopened| {
+                if reopened {
+                    decoder.resync();
+                }
+                sh2.last_data_ns.store(ns, Ordering::Relaxed);
+                decoder.feed(b, host_s, ns, |it| {
+                    sh2.imu_q.push(it);
+                });
+                dec[1].store(decoder.samples(), Ordering::Relaxed);
+            });
+        })
+        .map_err(|e| err(e.to_string()))
+}
+
+/// What the synchroniser thread hands back: its latency, counters and clock maps (JSON).
+type SyncEnd = (Histogram, SyncCounters, serde_json::Value);
+
+/// The synchroniser thread: both queues -> time-ordered events. Live, events are released on the
+/// host clock and a full event queue drops its oldest; offline, on the feeder's watermark, and
+/// nothing is dropped.
+fn spawn_sync(
+    sh: &Arc<Shared>,
+    sync_cfg: SyncConfig,
+    session_online_clock: bool,
+) -> Result<std::thread::JoinHandle<SyncEnd>, RunError> {
+    let sh2 = Arc::clone(sh);
+    std::thread::Builder::new()
+        .name("sync".into())
+        .spawn(move || {
+            let offline = sh2.offline;
+            let mut sync = Synchroniser::new(sync_cfg);
+            sync.offline_clock = offline && !session_online_clock;
+            sync.data_time = offline;
+            let mut hist = Histogram::default();
+            loop {
+                let done = sh2.inputs_done.load(Ordering::Acquire);
+                let watermark = f64::from_bits(sh2.watermark.load(Ordering::Acquire));
+                let mut any = false;
+                // IMU first: a radar frame pushed before these samples is then visible below.
+                // Bounded batches: a fast producer must not keep one drain going while the other
+                // queue fills.
+                for _ in 0..sh2.imu_q.len() {
+                    let Some(s) = sh2.imu_q.pop() else { break };
+                    sync.push_imu(s);
+                    any = true;
+                }
+                for _ in 0..sh2.radar_q.len() {
+                    let Some(r) = sh2.radar_q.pop() else { break };
+                    sync.push_radar(r, |b| sh2.pool.give(b));
+                    any = true;
+                }
+                let now = if offline {
+                    watermark
+                } else {
+                    sh2.epoch.elapsed().as_secs_f64()
+                };
+                let emit = |ev: SyncOut| {
+                    let read_ns = match &ev {
+                        SyncOut::Imu { read_ns, .. } => Some(*read_ns),
+                        SyncOut::Radar { item, .. } => Some(item.read_ns),
+                        SyncOut::Preview { .. } | SyncOut::Tick { .. } => None,
+                    };
+                    if let Some(r) = read_ns {
+                        hist.record(sh2.now_ns().saturating_sub(r));
+                    }
+                    if offline {
+                        sh2.ev_q.push_wait(ev);
+                    } else if let Some(old) = sh2.ev_q.push(ev) {
+                        recycle(&sh2, old);
+                    }
+                };
+                if now.is_finite() {
+                    sync.poll(now, emit);
+                }
+                if done && sh2.imu_q.is_empty() && sh2.radar_q.is_empty() {
+                    sync.flush(|ev| sh2.ev_q.push_wait(ev));
+                    break;
+                }
+                sh2.sync_dropped
+                    .store(sync.counters.dropped, Ordering::Relaxed);
+                if !any {
+                    std::thread::sleep(Duration::from_micros(200));
+                }
+            }
+            sh2.sync_dropped
+                .store(sync.counters.dropped, Ordering::Relaxed);
+            sh2.sync_done.store(true, Ordering::Release);
+            let clock = |c: &crate::sync::OnlineClock| {
+                c.map().map(|(o, r)| {
+                    json!({"offset_s": o, "rate": r, "accepted": c.accepted,
+                           "rejected_late": c.rejected_late})
+                })
+            };
+            let clocks = json!({
+                "radar": clock(&sync.radar_clock),
+                "imu": clock(&sync.imu_clock),
+                "offline_fit": offline,
+            });
+            (hist, sync.counters, clocks)
+        })
+        .map_err(|e| err(e.to_string()))
+}
+
+/// The estimator thread: events -> poses (live, a full pose queue drops its oldest).
+fn spawn_stage(
+    sh: &Arc<Shared>,
+    stage_cfg: StageConfig,
+    built: Built,
+) -> Result<std::thread::JoinHandle<(Histogram, StageCounters)>, RunError> {
+    let sh2 = Arc::clone(sh);
+    std::thread::Builder::new()
         .name("estimate".into())
         .spawn(move || {
             let mut stage = Stage::new(stage_cfg, built);
@@ -522,12 +663,8 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
                     ev,
                     t0,
                     |p| {
-                        if offline {
-                            let mut p = p;
-                            while let Err(back) = sh2.pose_q.try_push(p) {
-                                p = back;
-                                std::thread::sleep(Duration::from_micros(50));
-                            }
+                        if sh2.offline {
+                            sh2.pose_q.push_wait(p);
                         } else {
                             sh2.pose_q.push(p);
                         }
@@ -539,23 +676,36 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
             sh2.stage_done.store(true, Ordering::Release);
             (hist, stage.counters)
         })
-        .map_err(|e| err(e.to_string()))?;
+        .map_err(|e| err(e.to_string()))
+}
 
-    // Output stage.
-    let sh2 = Arc::clone(&sh);
-    let out_thread = std::thread::Builder::new()
+/// What the output thread hands back.
+#[derive(Debug, Default)]
+struct OutputEnd {
+    /// Estimator stage -> sent.
+    output: Histogram,
+    /// Radar-rate poses: sensor byte read -> sent.
+    end_to_end: Histogram,
+    /// Predicted poses: IMU sample read -> sent.
+    imu_to_pose: Histogram,
+    /// Poses sent (the next sequence number).
+    sent: u32,
+    send_errors: u64,
+    radar_poses: u64,
+}
+
+/// The output thread: poses -> sequence number, drop flags, host time -> every sink.
+fn spawn_output(
+    sh: &Arc<Shared>,
+    mut sinks: Vec<Sink>,
+) -> Result<std::thread::JoinHandle<OutputEnd>, RunError> {
+    let sh2 = Arc::clone(sh);
+    std::thread::Builder::new()
         .name("output".into())
         .spawn(move || {
             let mut enc = Encoded::default();
-            let mut seq = 0u32;
+            let mut end = OutputEnd::default();
             let mut last_dropped = 0u64;
-            let (mut h_out, mut h_e2e, mut h_imu) = (
-                Histogram::default(),
-                Histogram::default(),
-                Histogram::default(),
-            );
-            let mut send_errors = 0u64;
-            let mut radar_poses = 0u64;
             loop {
                 let done = sh2.stage_done.load(Ordering::Acquire);
                 let Some(mut p) = sh2.pose_q.pop() else {
@@ -570,42 +720,45 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
                     p.msg.health |= Health::FRAMES_DROPPED;
                 }
                 last_dropped = dropped;
-                p.msg.seq = seq;
-                seq = seq.wrapping_add(1);
+                p.msg.seq = end.sent;
+                end.sent = end.sent.wrapping_add(1);
                 p.msg.dropped_total = dropped.min(u64::from(u32::MAX)) as u32;
                 p.msg.host_time_ns = sh2.now_ns();
                 enc.encode(&p.msg);
                 for s in sinks.iter_mut() {
                     if let Err(e) = s.send(&p.msg, p.t, &enc.bytes, &enc.serial[..enc.serial_len]) {
-                        send_errors += 1;
-                        if send_errors < 10 {
+                        end.send_errors += 1;
+                        if end.send_errors < 10 {
                             tracing::warn!(error = %e, "output failed");
                         }
                     }
                 }
                 let sent = sh2.now_ns();
-                h_out.record(sent.saturating_sub(p.emitted_ns));
+                end.output.record(sent.saturating_sub(p.emitted_ns));
                 if p.msg.health.contains(Health::PREDICTED) {
-                    h_imu.record(sent.saturating_sub(p.read_ns));
+                    end.imu_to_pose.record(sent.saturating_sub(p.read_ns));
                 } else {
-                    radar_poses += 1;
-                    h_e2e.record(sent.saturating_sub(p.read_ns));
+                    end.radar_poses += 1;
+                    end.end_to_end.record(sent.saturating_sub(p.read_ns));
                 }
             }
             for s in sinks.iter_mut() {
                 let _ = s.flush();
             }
-            (h_out, h_e2e, h_imu, seq, send_errors, radar_poses)
+            end
         })
-        .map_err(|e| err(e.to_string()))?;
+        .map_err(|e| err(e.to_string()))
+}
 
-    // Supervise: limits, idle exit, end of inputs.
-    let started = Instant::now();
-    loop {
-        let inputs_finished = input_threads.iter().all(|t| t.is_finished());
-        if inputs_finished {
-            break;
-        }
+/// Waits for the inputs to end, stopping them on `stop`, the duration limit or idle exit.
+fn supervise(
+    sh: &Shared,
+    cfg: &RunConfig,
+    stop: &AtomicBool,
+    input_threads: Vec<std::thread::JoinHandle<()>>,
+    started: Instant,
+) {
+    while !input_threads.iter().all(|t| t.is_finished()) {
         let el = started.elapsed().as_secs_f64();
         let idle = cfg.idle_exit_s.is_some_and(|s| {
             let last = sh.last_data_ns.load(Ordering::Relaxed);
@@ -619,84 +772,74 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
     for t in input_threads {
         let _ = t.join();
     }
-    sh.inputs_done.store(true, Ordering::Release);
-    let (h_sync, sync_counters, clocks) = sync_thread
-        .join()
-        .map_err(|_| err("sync thread panicked"))?;
-    let (h_est, stage_counters) = stage_thread
-        .join()
-        .map_err(|_| err("estimator thread panicked"))?;
-    let (h_out, h_e2e, h_imu, sent, send_errors, radar_poses) = out_thread
-        .join()
-        .map_err(|_| err("output thread panicked"))?;
-    let wall_s = started.elapsed().as_secs_f64();
-    let dropped_total = sh.dropped();
-    let latency = Latencies {
-        sync: h_sync,
-        estimate: h_est,
-        output: h_out,
-        end_to_end: h_e2e,
-        imu_to_pose: h_imu,
+}
+
+/// What the stages reported at the end of a run.
+struct RunEnds<'a> {
+    estimator: EstimatorKind,
+    offline: bool,
+    wall_s: f64,
+    sync: SyncCounters,
+    clocks: serde_json::Value,
+    stage: StageCounters,
+    out: &'a OutputEnd,
+    radar_report: Option<&'a StreamReport>,
+}
+
+/// The radar plausibility verdicts: the session decoder's report, or the live reader's counters.
+fn plausibility_json(report: Option<&StreamReport>, live: &ReaderStats) -> serde_json::Value {
+    let load = |c: &AtomicU64| c.load(Ordering::Relaxed);
+    let (rejected, reanchored, retracted, held) = match report {
+        Some(r) => (r.implausible, r.reanchored, r.retracted, r.held),
+        None => (
+            live.implausible.each_ref().map(load),
+            load(&live.reanchored),
+            load(&live.retracted),
+            load(&live.held),
+        ),
     };
-    let radar_in = decoded[0].load(Ordering::Relaxed);
-    let plausibility = match &session_radar_report {
-        Some(r) => json!({
-            "rejected": r
-                .implausible_by_reason()
-                .map(|(n, c)| (n.to_string(), json!(c)))
-                .collect::<serde_json::Map<String, serde_json::Value>>(),
-            "rejected_total": r.implausible_total(),
-            "reanchored": r.reanchored,
-            "retracted": r.retracted,
-            "held": r.held,
-        }),
-        None => {
-            let by: serde_json::Map<String, serde_json::Value> =
-                radar_driver::plausible::IMPLAUSIBLE_NAMES
-                    .iter()
-                    .zip(&radar_stats.implausible)
-                    .map(|(n, c)| ((*n).to_string(), json!(c.load(Ordering::Relaxed))))
-                    .collect();
-            let total: u64 = radar_stats
-                .implausible
-                .iter()
-                .map(|c| c.load(Ordering::Relaxed))
-                .sum();
-            json!({
-                "rejected": by,
-                "rejected_total": total,
-                "reanchored": radar_stats.reanchored.load(Ordering::Relaxed),
-                "retracted": radar_stats.retracted.load(Ordering::Relaxed),
-                "held": radar_stats.held.load(Ordering::Relaxed),
-            })
-        }
-    };
-    let json = json!({
-        "estimator": cfg.estimator.name(),
-        "input": if offline { "session" } else { "devices" },
-        "wall_s": wall_s,
-        "frames_in": {"radar": radar_in, "imu": decoded[1].load(Ordering::Relaxed)},
-        "frames_out": {"poses_sent": sent, "radar_rate": radar_poses, "predicted": stage_counters.predicted_poses,
-                        "no_pose": stage_counters.no_pose, "resets": stage_counters.resets, "handovers": stage_counters.handovers, "estimator_errors": stage_counters.errors,
-                        "send_errors": send_errors},
-        "drops": {"radar_queue": sh.radar_q.dropped(), "imu_queue": sh.imu_q.dropped(), "sync_buffers": sync_counters.dropped,
-                  "event_queue": sh.ev_q.dropped(), "pose_queue": sh.pose_q.dropped(), "total": dropped_total},
-        "sync": {"radar_released": sync_counters.radar, "imu_released": sync_counters.imu, "radar_late": sync_counters.radar_late,
-                 "radar_gaps": sync_counters.radar_gaps, "warmup_held": sync_counters.warmup, "imu_gaps": sync_counters.imu_gaps, "clocks": clocks},
-        "ports": {"radar_reopens": radar_stats.reopens.load(Ordering::Relaxed), "imu_reopens": imu_stats.reopens.load(Ordering::Relaxed),
-                  "radar_bytes": radar_stats.bytes.load(Ordering::Relaxed), "imu_bytes": imu_stats.bytes.load(Ordering::Relaxed)},
+    let by: serde_json::Map<String, serde_json::Value> = radar_driver::plausible::IMPLAUSIBLE_NAMES
+        .iter()
+        .zip(rejected)
+        .map(|(n, c)| ((*n).to_string(), json!(c)))
+        .collect();
+    json!({
+        "rejected": by,
+        "rejected_total": rejected.iter().sum::<u64>(),
+        "reanchored": reanchored,
+        "retracted": retracted,
+        "held": held,
+    })
+}
+
+/// The run summary, as printed and written with `--summary-json`.
+fn summary_json(
+    e: &RunEnds<'_>,
+    sh: &Shared,
+    c: &InputCounters,
+    latency: &Latencies,
+) -> serde_json::Value {
+    let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
+    let radar_in = load(&c.decoded[0]);
+    let (sc, st) = (&e.sync, &e.stage);
+    json!({
+        "estimator": e.estimator.name(),
+        "input": if e.offline { "session" } else { "devices" },
+        "wall_s": e.wall_s,
+        "frames_in": {"radar": radar_in, "imu": load(&c.decoded[1])},
+        "frames_out": {"poses_sent": e.out.sent, "radar_rate": e.out.radar_poses, "predicted": st.predicted_poses,
+                        "no_pose": st.no_pose, "resets": st.resets, "handovers": st.handovers, "estimator_errors": st.errors,
+                        "send_errors": e.out.send_errors},
+        "drops": {"radar_queue": sh.radar_q.dropped(), "imu_queue": sh.imu_q.dropped(), "sync_buffers": sc.dropped,
+                  "event_queue": sh.ev_q.dropped(), "pose_queue": sh.pose_q.dropped(), "total": sh.dropped()},
+        "sync": {"radar_released": sc.radar, "imu_released": sc.imu, "radar_late": sc.radar_late,
+                 "radar_gaps": sc.radar_gaps, "warmup_held": sc.warmup, "imu_gaps": sc.imu_gaps, "clocks": e.clocks},
+        "ports": {"radar_reopens": load(&c.radar.reopens), "imu_reopens": load(&c.imu.reopens),
+                  "radar_bytes": load(&c.radar.bytes), "imu_bytes": load(&c.imu.bytes)},
         "latency": {"sync": latency.sync.to_json(), "estimate": latency.estimate.to_json(), "output": latency.output.to_json(),
                     "end_to_end": latency.end_to_end.to_json(), "imu_to_pose": latency.imu_to_pose.to_json()},
-        "radar_plausibility": plausibility,
-        "per_radar_frame_us": if radar_in > 0 { wall_s * 1e6 / radar_in as f64 } else { 0.0 },
-    });
-    Ok(Summary {
-        json,
-        latency,
-        poses_sent: u64::from(sent),
-        radar_poses,
-        dropped_total,
-        wall_s,
+        "radar_plausibility": plausibility_json(e.radar_report, &c.radar),
+        "per_radar_frame_us": if radar_in > 0 { e.wall_s * 1e6 / radar_in as f64 } else { 0.0 },
     })
 }
 
@@ -748,10 +891,7 @@ fn feed_session(
         it.t = (!online_clock).then_some(tr);
         it.points.clear();
         it.points.extend_from_slice(&f.cloud.points);
-        while let Err(back) = sh.radar_q.try_push(it) {
-            it = back;
-            std::thread::sleep(Duration::from_micros(50));
-        }
+        sh.radar_q.push_wait(it);
         decoded[0].fetch_add(1, Ordering::Relaxed);
         sh.watermark.store(tr.to_bits(), Ordering::Release);
     };
@@ -767,7 +907,7 @@ fn feed_session(
             next += 1;
         }
         pace(t);
-        let mut it = ImuItem {
+        let it = ImuItem {
             host_s: s.host_s.unwrap_or(t),
             read_ns: sh.now_ns(),
             sensor_s: s.sensor_s,
@@ -776,10 +916,7 @@ fn feed_session(
             bytes: s.bytes,
             t: (!online_clock).then_some(t),
         };
-        while let Err(back) = sh.imu_q.try_push(it) {
-            it = back;
-            std::thread::sleep(Duration::from_micros(50));
-        }
+        sh.imu_q.push_wait(it);
         decoded[1].fetch_add(1, Ordering::Relaxed);
         sh.watermark.store(t.to_bits(), Ordering::Release);
     }

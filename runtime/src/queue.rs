@@ -43,6 +43,27 @@ impl<T> DropOldest<T> {
         Ok(())
     }
 
+    /// Pushes `item` without dropping anything: while the queue is full, waits for the consumer
+    /// (spinning briefly, then sleeping 50 us at a time). For offline runs, where every item must
+    /// get through and the producer may go at the consumer's pace; live producers use
+    /// [`DropOldest::push`].
+    pub fn push_wait(&self, mut item: T) {
+        let mut tries = 0u32;
+        loop {
+            match self.try_push(item) {
+                Ok(()) => return,
+                Err(back) => item = back,
+            }
+            tries += 1;
+            if tries < 64 {
+                std::hint::spin_loop();
+                std::thread::yield_now();
+            } else {
+                std::thread::sleep(std::time::Duration::from_micros(50));
+            }
+        }
+    }
+
     /// The oldest item, if any.
     pub fn pop(&self) -> Option<T> {
         self.q.pop()
@@ -119,6 +140,27 @@ impl<T: Default> Pool<T> {
 mod tests {
     use super::*;
     use std::sync::Arc;
+
+    #[test]
+    fn push_wait_delivers_everything_in_order_through_a_small_queue() {
+        let q = Arc::new(DropOldest::new(2));
+        let q2 = Arc::clone(&q);
+        let producer = std::thread::spawn(move || {
+            for i in 0..500u32 {
+                q2.push_wait(i);
+            }
+        });
+        let mut got = Vec::new();
+        while got.len() < 500 {
+            match q.pop() {
+                Some(v) => got.push(v),
+                None => std::thread::yield_now(),
+            }
+        }
+        producer.join().unwrap();
+        assert_eq!(got, (0..500).collect::<Vec<_>>());
+        assert_eq!((q.pushed(), q.dropped()), (500, 0));
+    }
 
     #[test]
     fn full_queue_drops_the_oldest_and_counts_it() {
