@@ -170,7 +170,7 @@ fn listen(a: ListenArgs) -> Result<()> {
                 writeln!(
                     t,
                     "{:.9} {} {} {} {} {} {} {}",
-                    m.sensor_time_ns as f64 / 1e9,
+                    m.measurement_time_ns as f64 / 1e9,
                     m.position[0],
                     m.position[1],
                     m.position[2],
@@ -185,7 +185,7 @@ fn listen(a: ListenArgs) -> Result<()> {
                     "seq": m.seq,
                     "estimator": m.estimator.name(),
                     "health": m.health.names().collect::<Vec<_>>(),
-                    "sensor_time_s": m.sensor_time_ns as f64 / 1e9,
+                    "measurement_time_s": m.measurement_time_ns as f64 / 1e9,
                     "host_time_s": m.host_time_ns as f64 / 1e9,
                     "position": m.position,
                     "orientation_wxyz": m.orientation,

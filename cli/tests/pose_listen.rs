@@ -44,7 +44,7 @@ fn listen_decodes_datagrams_and_reports_drops_and_gaps() {
     for (seq, corrupt) in [(1u32, false), (2, true), (3, false), (5, false)] {
         let m = PoseMessage {
             seq,
-            sensor_time_ns: u64::from(seq) * 50_000_000,
+            measurement_time_ns: u64::from(seq) * 50_000_000,
             position: [f64::from(seq), 0.0, 0.0],
             ..PoseMessage::default()
         };

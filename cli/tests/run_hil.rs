@@ -155,7 +155,7 @@ fn on_session_clock(s: &Session, o: &Online) -> Vec<TumPose> {
         .map(|m| {
             let [w, x, y, z] = m.orientation.map(f64::from);
             TumPose {
-                t: m.sensor_time_ns as f64 * 1e-9 + shift,
+                t: m.measurement_time_ns as f64 * 1e-9 + shift,
                 p: m.position,
                 q: [x, y, z, w],
             }
@@ -208,7 +208,7 @@ fn replayed_session_streams_a_pose_per_radar_frame_as_good_as_offline() {
         .collect();
     // After the 1 s levelling window, one pose per radar frame (20 Hz): no gap in sensor time.
     for w in radar_rate.windows(2) {
-        let dt = (w[1].sensor_time_ns - w[0].sensor_time_ns) as f64 * 1e-9;
+        let dt = (w[1].measurement_time_ns - w[0].measurement_time_ns) as f64 * 1e-9;
         assert!((0.03..0.07).contains(&dt), "radar-rate poses {dt} s apart");
     }
     let (n_off, ate_off) = offline_ate(d.path(), &s);
@@ -223,7 +223,7 @@ fn replayed_session_streams_a_pose_per_radar_frame_as_good_as_offline() {
         .iter()
         .enumerate()
         .filter(|(_, m)| m.health.0 & missing.0 != 0)
-        .map(|(k, m)| (k, m.sensor_time_ns as f64 * 1e-9))
+        .map(|(k, m)| (k, m.measurement_time_ns as f64 * 1e-9))
         .collect();
     // Only a frame after the IMU's last sample (the replay ended) may be flagged.
     assert!(
@@ -246,8 +246,8 @@ fn replayed_session_streams_a_pose_per_radar_frame_as_good_as_offline() {
         .filter_map(|r| {
             let p = predicted
                 .iter()
-                .min_by_key(|p| p.sensor_time_ns.abs_diff(r.sensor_time_ns))?;
-            (p.sensor_time_ns.abs_diff(r.sensor_time_ns) < 3_000_000).then(|| {
+                .min_by_key(|p| p.measurement_time_ns.abs_diff(r.measurement_time_ns))?;
+            (p.measurement_time_ns.abs_diff(r.measurement_time_ns) < 3_000_000).then(|| {
                 (0..3)
                     .map(|i| (p.position[i] - r.position[i]).powi(2))
                     .sum::<f64>()
@@ -301,8 +301,8 @@ fn port_reopen_and_stalls_are_flagged_and_recovered_from() {
         ],
     );
     assert!(o.summary["ports"]["radar_reopens"].as_u64().unwrap() >= 1);
-    let t0 = o.msgs[0].sensor_time_ns;
-    let rel = |m: &PoseMessage| (m.sensor_time_ns - t0) as f64 * 1e-9;
+    let t0 = o.msgs[0].measurement_time_ns;
+    let rel = |m: &PoseMessage| (m.measurement_time_ns - t0) as f64 * 1e-9;
     // Each stall shows as a run of flagged poses, and the flag clears again afterwards.
     for (flag, name) in [
         (Health::RADAR_MISSING, "radar"),

@@ -73,8 +73,7 @@ impl fmt::Display for EncodeError {
     }
 }
 
-#[cfg(feature = "std")]
-impl std::error::Error for EncodeError {}
+impl core::error::Error for EncodeError {}
 
 fn too_small(need: usize, have: usize) -> EncodeError {
     EncodeError::BufferTooSmall { need, have }

@@ -83,8 +83,7 @@ impl fmt::Display for FrameError {
     }
 }
 
-#[cfg(feature = "std")]
-impl std::error::Error for FrameError {}
+impl core::error::Error for FrameError {}
 
 /// What the bytes at the start of a slice (starting with the preamble) amount to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -51,6 +51,24 @@ impl BadFrames {
     }
 }
 
+impl Counters {
+    /// Total rejected candidates (the same API as the radar framer's counters).
+    pub fn frames_bad_total(&self) -> u64 {
+        self.frames_bad.total()
+    }
+
+    /// `(reason, count)` of the rejected candidates, every reason listed.
+    pub fn frames_bad_by_reason(&self) -> impl Iterator<Item = (&'static str, u64)> + '_ {
+        let b = &self.frames_bad;
+        [
+            ("checksum", b.checksum),
+            ("length", b.length),
+            ("truncated", b.truncated),
+        ]
+        .into_iter()
+    }
+}
+
 /// Running totals of a [`Framer`], readable at any time.
 ///
 /// Invariant: `bytes_in == bytes in good frames + bytes_skipped + Framer::buffered()`.

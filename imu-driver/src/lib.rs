@@ -30,6 +30,9 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+#[cfg(feature = "alloc")]
+extern crate alloc;
+
 #[cfg(all(test, not(feature = "std")))]
 extern crate std;
 
@@ -41,7 +44,7 @@ pub mod mtdata2;
 pub mod reduced;
 pub mod time;
 
-#[cfg(feature = "std")]
+#[cfg(feature = "alloc")]
 pub mod host;
 
 pub use encode::{encode_frame, EncodeError, HostMessage, MtData2Writer, BID_MASTER};

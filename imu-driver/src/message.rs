@@ -414,8 +414,7 @@ impl fmt::Display for MessageError {
     }
 }
 
-#[cfg(feature = "std")]
-impl std::error::Error for MessageError {}
+impl core::error::Error for MessageError {}
 
 /// A message from a device, decoded from a frame.
 #[derive(Debug, Clone, Copy, PartialEq)]

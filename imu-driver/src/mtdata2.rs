@@ -411,8 +411,7 @@ impl fmt::Display for Mtdata2Error {
     }
 }
 
-#[cfg(feature = "std")]
-impl std::error::Error for Mtdata2Error {}
+impl core::error::Error for Mtdata2Error {}
 
 /// A view of an MTData2 payload.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

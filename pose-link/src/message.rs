@@ -136,9 +136,12 @@ pub struct PoseMessage {
     pub estimator: Estimator,
     /// Sequence number, +1 per message (wraps at 2^32); a gap means lost messages.
     pub seq: u32,
-    /// Sensor time of the pose (the radar frame or IMU sample it belongs to, mapped to the
-    /// synchronised sensor clock) \[ns\].
-    pub sensor_time_ns: u64,
+    /// When the measurement the pose belongs to was taken (the middle of the radar frame's chirps,
+    /// or the IMU sample), on the run's common clock \[ns\]: live, the host monotonic clock from
+    /// the pipeline's start, onto which the synchroniser maps both sensors' clocks; offline, the
+    /// session clock. Wire offset 12 (named "sensor time" before; same field, same meaning on
+    /// the wire).
+    pub measurement_time_ns: u64,
     /// Host monotonic time when the message was built \[ns\].
     pub host_time_ns: u64,
     /// Position of the body in the world (trajectory origin) frame \[m\].
@@ -159,7 +162,7 @@ impl Default for PoseMessage {
             health: Health::default(),
             estimator: Estimator::Model,
             seq: 0,
-            sensor_time_ns: 0,
+            measurement_time_ns: 0,
             host_time_ns: 0,
             position: [0.0; 3],
             orientation: [1.0, 0.0, 0.0, 0.0],
@@ -314,7 +317,7 @@ impl PoseMessage {
         w.put(&[self.estimator.code(), 0]);
         w.put(&(BODY_V1 as u16).to_le_bytes());
         w.put(&self.seq.to_le_bytes());
-        w.put(&self.sensor_time_ns.to_le_bytes());
+        w.put(&self.measurement_time_ns.to_le_bytes());
         w.put(&self.host_time_ns.to_le_bytes());
         self.position.iter().for_each(|v| w.put(&v.to_le_bytes()));
         self.orientation
@@ -378,7 +381,7 @@ impl PoseMessage {
         let [est, _reserved] = r.take::<2>();
         let _body_len: [u8; 2] = r.take();
         let seq = u32::from_le_bytes(r.take());
-        let sensor_time_ns = u64::from_le_bytes(r.take());
+        let measurement_time_ns = u64::from_le_bytes(r.take());
         let host_time_ns = u64::from_le_bytes(r.take());
         let position = [r.f64(), r.f64(), r.f64()];
         let orientation = [r.f32(), r.f32(), r.f32(), r.f32()];
@@ -389,7 +392,7 @@ impl PoseMessage {
             health,
             estimator: Estimator::from_code(est),
             seq,
-            sensor_time_ns,
+            measurement_time_ns,
             host_time_ns,
             position,
             orientation,

@@ -20,7 +20,7 @@ fn hex(b: &[u8]) -> String {
 fn vector_messages() -> Vec<PoseMessage> {
     let a = PoseMessage {
         seq: 1,
-        sensor_time_ns: 1_000_000_000,
+        measurement_time_ns: 1_000_000_000,
         host_time_ns: 1_000_250_000,
         ..PoseMessage::default()
     };
@@ -37,7 +37,7 @@ fn vector_messages() -> Vec<PoseMessage> {
     c.seq = u32::MAX;
     c.health = Health(0xFFFF);
     c.estimator = Estimator::Imu;
-    c.sensor_time_ns = u64::MAX;
+    c.measurement_time_ns = u64::MAX;
     vec![a, b, c]
 }
 
@@ -51,7 +51,7 @@ fn f32s<const N: usize>(v: [f32; N]) -> Vec<f64> {
 fn fields(m: &PoseMessage) -> Value {
     json!({
         "seq": m.seq, "health": m.health.0, "estimator": m.estimator.code(),
-        "sensor_time_ns": m.sensor_time_ns, "host_time_ns": m.host_time_ns,
+        "measurement_time_ns": m.measurement_time_ns, "host_time_ns": m.host_time_ns,
         "position": m.position, "orientation": f32s(m.orientation),
         "rel_translation": f32s(m.rel_translation), "rel_rotation": f32s(m.rel_rotation),
         "dropped_total": m.dropped_total,
@@ -124,7 +124,7 @@ fn message() -> impl Strategy<Value = PoseMessage> {
                     health: Health(h),
                     estimator: Estimator::from_code(e),
                     seq,
-                    sensor_time_ns: st,
+                    measurement_time_ns: st,
                     host_time_ns: ht,
                     position,
                     orientation,

@@ -105,8 +105,7 @@ impl fmt::Display for CfgError {
     }
 }
 
-#[cfg(feature = "std")]
-impl std::error::Error for CfgError {}
+impl core::error::Error for CfgError {}
 
 /// profileCfg, as written (before the device quantises it).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

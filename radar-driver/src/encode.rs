@@ -23,8 +23,7 @@ impl fmt::Display for BufferTooSmall {
     }
 }
 
-#[cfg(feature = "std")]
-impl std::error::Error for BufferTooSmall {}
+impl core::error::Error for BufferTooSmall {}
 
 /// A raw SDK 1/2 point: {u16 rangeIdx, i16 dopplerIdx, u16 peakVal, i16 x, y, z} (x, y, z in Q format).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -377,9 +376,9 @@ impl<'a> FrameBuilder<'a> {
     }
 
     /// The frame as a new vector.
-    #[cfg(feature = "std")]
-    pub fn to_vec(&self) -> Vec<u8> {
-        let mut v = vec![0u8; self.len()];
+    #[cfg(feature = "alloc")]
+    pub fn to_vec(&self) -> alloc::vec::Vec<u8> {
+        let mut v = alloc::vec![0u8; self.len()];
         let n = self.write(&mut v).unwrap_or(0);
         v.truncate(n);
         v

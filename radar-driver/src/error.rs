@@ -233,7 +233,5 @@ impl fmt::Display for TlvError {
     }
 }
 
-#[cfg(feature = "std")]
-impl std::error::Error for FrameError {}
-#[cfg(feature = "std")]
-impl std::error::Error for TlvError {}
+impl core::error::Error for FrameError {}
+impl core::error::Error for TlvError {}

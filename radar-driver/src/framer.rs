@@ -61,6 +61,15 @@ impl Counters {
     pub fn frames_bad_total(&self) -> u64 {
         self.frames_bad.iter().sum()
     }
+
+    /// `(reason, count)` of the rejected candidates, every reason listed (the same API as the
+    /// Xbus framer's counters).
+    pub fn frames_bad_by_reason(&self) -> impl Iterator<Item = (&'static str, u64)> + '_ {
+        crate::error::FRAME_ERROR_NAMES
+            .iter()
+            .copied()
+            .zip(self.frames_bad.iter().copied())
+    }
 }
 
 /// What follows a released frame.

@@ -14,7 +14,9 @@
 //!   the sensor clock, the .cfg's range/velocity/point limits, finite values): the format has no
 //!   checksum, so a corrupted byte inside a frame is caught there or not at all.
 //! * [`encode`] writes frames of every layout (tests, fuzz seeds, the simulator).
-//! * With the `std` feature, [`host`] adds a timestamping reader and the CLI-port controller.
+//! * [`host`] (feature `alloc`) adds owned point clouds and the streaming bytes -> clouds
+//!   decoder; with `std` a timestamping reader over `std::io::Read`; with `serial` (the default)
+//!   the CLI-port controller.
 //!
 //! The core is `no_std` without allocation (heapless), for firmware-side use.
 //!
@@ -37,13 +39,16 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+#[cfg(feature = "alloc")]
+extern crate alloc;
+
 pub mod cfg;
 pub mod clock;
 pub mod encode;
 pub mod error;
 pub mod frame;
 pub mod framer;
-#[cfg(feature = "std")]
+#[cfg(feature = "alloc")]
 pub mod host;
 pub mod plausible;
 pub mod tlv;

@@ -381,8 +381,7 @@ impl fmt::Display for Implausible {
     }
 }
 
-#[cfg(feature = "std")]
-impl std::error::Error for Implausible {}
+impl core::error::Error for Implausible {}
 
 /// What to do with a frame.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -463,7 +463,7 @@ impl Stage {
             health,
             estimator: self.code(radar_missing),
             seq: 0,
-            sensor_time_ns: (t.max(0.0) * 1e9) as u64,
+            measurement_time_ns: (t.max(0.0) * 1e9) as u64,
             host_time_ns: 0,
             position: [p.x, p.y, p.z],
             orientation: wxyz_f32(&pose.rotation),

@@ -179,7 +179,7 @@ pub fn imu_samples(session: &Session) -> Result<(Vec<ImuSample>, StreamReport), 
         StreamReport {
             bytes: r.framer.bytes_in,
             ok: r.framer.frames_ok,
-            bad: r.framer.frames_bad.total(),
+            bad: r.framer.frames_bad_total(),
             bytes_skipped: r.framer.bytes_skipped,
             not_samples: r.not_samples,
             ..StreamReport::default()

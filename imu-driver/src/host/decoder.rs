@@ -34,6 +34,7 @@ use crate::framer::{Counters, Poll};
 use crate::message::Message;
 use crate::time::{Checker, Flags, TimeWrap};
 use crate::LogFramer;
+use alloc::boxed::Box;
 
 /// One IMU sample. `stamp` is what the caller passed with the chunk that completed the message.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -4,6 +4,7 @@
 use crate::error::TlvError;
 use crate::frame::Frame;
 use crate::tlv::{Dialect, Point, Stats, Target, Tlv};
+use alloc::vec::Vec;
 
 /// The decoded content of one frame that egomotion and the dump care about.
 #[derive(Debug, Clone, PartialEq, Default)]

@@ -37,6 +37,7 @@ use crate::clock::{cpu_clock_hz, CycleUnwrapper};
 use crate::error::FrameError;
 use crate::framer::{Counters, Framer, Poll, DEFAULT_MAX_FRAME};
 use crate::plausible::{CheckCounters, Checker, Limits};
+use alloc::boxed::Box;
 
 /// What the decoder needs from the radar's `.cfg` (all optional: without a `.cfg` the defaults
 /// hold).
