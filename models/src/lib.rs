@@ -10,6 +10,7 @@
 //! carries its state from window to window until [`Model::reset`].
 #![forbid(unsafe_code)]
 
+pub mod chain;
 pub mod offline;
 
 use milliego_preprocess::window::Window;

@@ -1,11 +1,14 @@
 //! The model over a recorded or simulated session, offline: the session's streams go through the
 //! shared window builder (`milliego_preprocess::dataset::feed_session`), the model runs on the
 //! keyframe chain (each window starts where the previous one ended: every `gap`-th radar frame)
-//! and the relative poses are composed into a trajectory (`T_cur = T_prev * T_rel`).
+//! and the relative poses are composed into a trajectory (`T_cur = T_prev * T_rel`). The chain is
+//! [`crate::chain::KeyframeChain`], the one the on-device runtime runs.
 
+use crate::chain::{ChainError, ChainStep, KeyframeChain, Stepper};
 use crate::{Model, ModelError};
 use milliego_preprocess::dataset::{feed_session, DatasetError, Event, Fed};
-use milliego_preprocess::pose::{from_label, to_tum};
+use milliego_preprocess::pose::to_tum;
+use milliego_preprocess::window::Window;
 use milliego_session::{Session, TumPose};
 use nalgebra::Isometry3;
 use std::time::Instant;
@@ -22,6 +25,9 @@ pub struct ModelRun {
     /// Times the chain broke (a lost window): composition bridged from the last keyframe and the
     /// LSTM state was reset.
     pub chain_breaks: u64,
+    /// Windows whose model output was not a finite pose: no pose for them, the chain broke after
+    /// each (counted in `chain_breaks` when a later window came).
+    pub bad_outputs: u64,
     /// Inference time per window \[ms\] (tract only, excludes preprocessing).
     pub infer_ms: Vec<f64>,
     /// What feeding the session saw.
@@ -48,59 +54,67 @@ impl std::fmt::Display for RunError {
 
 impl std::error::Error for RunError {}
 
-/// Runs `model` over `session` (the model's state is reset first).
+/// The model with its inference time per window recorded \[ms\].
+struct Timed<'a> {
+    model: &'a mut Model,
+    infer_ms: &'a mut Vec<f64>,
+}
+
+impl Stepper for Timed<'_> {
+    fn step(&mut self, w: &Window<'_>) -> Result<[f32; 6], ModelError> {
+        let t0 = Instant::now();
+        let out = self.model.step(w)?;
+        self.infer_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        Ok(out)
+    }
+
+    fn reset(&mut self) {
+        self.model.reset();
+    }
+}
+
+/// Runs `model` over `session` (the model's state is reset first): a loop over one
+/// [`KeyframeChain`]. A window whose output is not a finite pose gets no pose and is counted in
+/// [`ModelRun::bad_outputs`] (the chain breaks after it); a failing model ends the run.
 pub fn run_session(model: &mut Model, session: &Session) -> Result<ModelRun, RunError> {
     model.reset();
     let pre = model.meta().preprocess;
-    let mut run = ModelRun {
-        trajectory: Vec::new(),
-        steps: 0,
-        off_chain: 0,
-        chain_breaks: 0,
-        infer_ms: Vec::new(),
-        fed: Fed::default(),
-    };
-    let mut last: Option<(u64, Isometry3<f64>)> = None;
+    let mut trajectory = Vec::new();
+    let mut infer_ms = Vec::new();
+    let mut chain = KeyframeChain::new();
     let mut failure: Option<ModelError> = None;
+    let mut timed = Timed {
+        model,
+        infer_ms: &mut infer_ms,
+    };
     let fed = feed_session(session, &pre, &mut |ev| {
         let Event::Window(w) = ev else { return };
         if failure.is_some() {
             return;
         }
-        let from = match last {
-            None => {
-                run.trajectory
-                    .push(to_tum(w.t_prev, &Isometry3::identity()));
-                Isometry3::identity()
+        match chain.step(&mut timed, &w) {
+            Ok(ChainStep::Pose(p)) => {
+                if p.starts_chain && trajectory.is_empty() {
+                    trajectory.push(to_tum(p.t_from, &Isometry3::identity()));
+                }
+                trajectory.push(to_tum(p.t_to, &p.pose));
             }
-            Some((seq, pose)) if seq == w.prev_seq => pose,
-            Some((seq, pose)) if w.prev_seq > seq => {
-                run.chain_breaks += 1;
-                model.reset();
-                pose
-            }
-            Some(_) => {
-                run.off_chain += 1;
-                return;
-            }
-        };
-        let t0 = Instant::now();
-        match model.step(&w) {
-            Ok(out) => {
-                run.infer_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-                run.steps += 1;
-                let rel = from_label(&out.map(f64::from)).unwrap_or_else(Isometry3::identity);
-                let pose = from * rel;
-                run.trajectory.push(to_tum(w.t_cur, &pose));
-                last = Some((w.cur_seq, pose));
-            }
-            Err(e) => failure = Some(e),
+            Ok(ChainStep::OffChain) | Err(ChainError::BadOutput { .. }) => {}
+            Err(ChainError::Model(e)) => failure = Some(e),
         }
     })
     .map_err(RunError::Session)?;
     if let Some(e) = failure {
         return Err(RunError::Model(e));
     }
-    run.fed = fed;
-    Ok(run)
+    let c = *chain.counters();
+    Ok(ModelRun {
+        trajectory,
+        steps: c.steps,
+        off_chain: c.off_chain,
+        chain_breaks: c.chain_breaks,
+        bad_outputs: c.bad_outputs,
+        infer_ms,
+        fed,
+    })
 }

@@ -6,6 +6,9 @@
 //!   covariance, and degenerate geometry reported rather than silently wrong.
 //! * [`rio`]: the error-state Kalman filter that fuses both (IMU propagation, radar velocity
 //!   updates, bias estimation, chi-square gating).
+//! * [`runner`]: the streaming loop over both (levelling, priors, the health rule, updates, IMU
+//!   gaps), one IMU sample or radar frame at a time; the offline runner ([`offline`]) and the
+//!   runtime's classical estimators are loops over it.
 //! * [`strapdown`]: IMU integration (orientation, velocity, position) used for dead reckoning and,
 //!   later, for the filter's propagation step.
 #![forbid(unsafe_code)]
@@ -14,4 +17,5 @@
 pub mod ego_velocity;
 pub mod offline;
 pub mod rio;
+pub mod runner;
 pub mod strapdown;

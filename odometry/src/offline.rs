@@ -1,14 +1,14 @@
 //! Running the classical estimators over a recorded or simulated session: Doppler radar-inertial
 //! odometry, or IMU-only dead reckoning (the same integration code), giving a trajectory of the
 //! body frame at radar rate on the session host clock, ready for `milliego eval` against ground
-//! truth.
+//! truth. The loop itself is [`crate::runner::Runner`], the one the on-device runtime runs.
 
-use crate::ego_velocity::{Config as EgoConfig, Detection, EgoVelocityEstimator, Prior, Status};
-use crate::rio::{RadarMount, Rio, RioConfig, VelocityMeasurement};
+use crate::ego_velocity::Config as EgoConfig;
+use crate::rio::RioConfig;
+use crate::runner::{ClassicalConfig, FrameInput, Mounting, Runner};
 use crate::strapdown::ImuSample;
 use milliego_session::streams::{imu_samples, radar_frames, ClockFit, SessionClock, StreamReport};
-use milliego_session::{Extrinsic, Session, SessionError, TumPose};
-use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use milliego_session::{Session, SessionError, TumPose};
 
 /// Which estimator to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -37,13 +37,15 @@ pub struct OfflineConfig {
 }
 
 impl Default for OfflineConfig {
+    /// Doppler, with the classical estimators' defaults ([`ClassicalConfig::default`]).
     fn default() -> Self {
+        let c = ClassicalConfig::default();
         OfflineConfig {
             estimator: Estimator::Doppler,
-            rio: RioConfig::default(),
-            ego: EgoConfig::default(),
-            level_window_s: 1.0,
-            velocity_cov_scale: 1.0,
+            rio: c.rio,
+            ego: c.ego,
+            level_window_s: c.level_window_s,
+            velocity_cov_scale: c.velocity_cov_scale,
         }
     }
 }
@@ -108,15 +110,9 @@ impl From<SessionError> for OfflineError {
     }
 }
 
-fn iso(e: &Extrinsic) -> (UnitQuaternion<f64>, Vector3<f64>) {
-    let [w, x, y, z] = e.rotation_wxyz;
-    (
-        UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
-        Vector3::from(e.translation_m),
-    )
-}
-
-/// Runs `cfg.estimator` over `session`.
+/// Runs `cfg.estimator` over `session`: a loop over one [`Runner`] fed in time order (each
+/// radar frame just before the first IMU sample at or past its time). Frames before the first
+/// or after the last IMU sample get no pose.
 pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, OfflineError> {
     let (frames, radar_rep) = radar_frames(session)?;
     let (imu, imu_rep) = imu_samples(session)?;
@@ -131,134 +127,75 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
     // One time base for both streams (the lower-envelope clock fits of the session crate).
     let clock = SessionClock::fit(session, &frames, &imu)?;
     let (radar_clock, imu_clock, clock_unsynced) = (clock.radar, clock.imu, clock.unsynced());
-    let imu_t = |s: f64| clock.imu_s(s);
-    let radar_t = |f: &milliego_session::streams::RadarFrame| clock.radar_s(f);
 
-    // Radar and IMU placement: the filter runs in the IMU frame.
-    let (q_bi, t_bi) = iso(&session.meta.extrinsics.imu);
-    let (q_br, t_br) = iso(&session.meta.extrinsics.radar);
-    let q_ir = q_bi.inverse() * q_br;
-    let t_ir = q_bi.inverse() * (t_br - t_bi);
-    let mount = RadarMount {
-        rotation: q_ir,
-        translation: t_ir,
-    };
-
-    // Level from the mean specific force over the first window.
-    let t0 = imu_t(imu[0].sensor_s);
-    let head: Vec<&milliego_session::streams::ImuSample> = imu
-        .iter()
-        .take_while(|s| imu_t(s.sensor_s) - t0 <= cfg.level_window_s)
-        .collect();
-    let mean_f = head
-        .iter()
-        .fold(Vector3::zeros(), |a, s| a + Vector3::from(s.accel))
-        / head.len().max(1) as f64;
-    let mut rio = Rio::levelled(cfg.rio, mount, t0, mean_f.into());
-
-    let mut ego = EgoVelocityEstimator::new(cfg.ego);
-    let mut res = OfflineResult {
-        trajectory: Vec::new(),
-        radar: radar_rep,
-        imu: imu_rep,
-        radar_frames: frames.len(),
-        ego_ok: 0,
-        ego_degenerate: 0,
-        ego_too_few: 0,
-        ego_no_consensus: 0,
-        updates: 0,
-        gated: 0,
-        imu_samples: imu.len(),
-        radar_clock,
-        imu_clock,
-        clock_unsynced,
-    };
+    let mut runner = Runner::new(
+        &ClassicalConfig {
+            rio: cfg.rio,
+            ego: cfg.ego,
+            level_window_s: cfg.level_window_s,
+            velocity_cov_scale: cfg.velocity_cov_scale,
+            // The filter runs in the IMU frame, placed by the session's extrinsics.
+            mounting: Mounting::from_session(&session.meta.extrinsics),
+            // Offline, both streams are complete: no radar-only dead reckoning.
+            imu_gap_s: f64::INFINITY,
+        },
+        cfg.estimator == Estimator::Doppler,
+    );
     let mut radar_times: Vec<(f64, usize)> = frames
         .iter()
         .enumerate()
-        .filter_map(|(i, f)| Some((radar_t(f)?, i)))
+        .filter_map(|(i, f)| Some((clock.radar_s(f)?, i)))
         .collect();
     radar_times.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut trajectory = Vec::with_capacity(radar_times.len());
+    let mut drain = |runner: &mut Runner| {
+        while let Some(p) = runner.pop_pose() {
+            let q = p.body.rotation;
+            trajectory.push(TumPose {
+                t: p.t,
+                p: p.body.translation.vector.into(),
+                q: [q.i, q.j, q.k, q.w],
+            });
+        }
+    };
     let mut next = 0;
-    let mut outputs: Vec<f64> = Vec::new();
-    let (q_ib, t_ib) = (q_bi.inverse(), -(q_bi.inverse() * t_bi));
-    let mut dets = Vec::new();
-    let mut rejected_in_row = 0u32;
     for s in &imu {
-        let t = imu_t(s.sensor_s);
+        let t = clock.imu_s(s.sensor_s);
         while next < radar_times.len() && radar_times[next].0 <= t {
             let (tr, i) = radar_times[next];
             next += 1;
-            if tr < t0 {
-                continue;
-            }
-            outputs.push(tr);
-            if cfg.estimator != Estimator::Doppler {
-                continue;
-            }
-            dets.clear();
-            dets.extend(frames[i].cloud.points.iter().map(|p| Detection {
-                position: [p.x, p.y, p.z],
-                radial_velocity: p.velocity,
-            }));
-            // Guide the consensus with the filter's prediction once the velocity is known and
-            // the filter is healthy (its last frames were accepted): a diverged filter's prior
-            // would only keep rejecting the truth.
-            let healthy = rio.counters().updates >= 10 && rejected_in_row < 3;
-            let prior = healthy.then(|| {
-                let (velocity, covariance) = rio.predicted_radar_velocity();
-                Prior {
-                    velocity,
-                    covariance,
-                    gate: cfg.rio.gate,
-                }
+            runner.push_radar(&FrameInput {
+                t: tr,
+                id: i as u64,
+                points: &frames[i].cloud.points,
             });
-            let e = ego.estimate_guided(&dets, prior);
-            match e.status {
-                Status::Ok => {
-                    res.ego_ok += 1;
-                    let c = e
-                        .covariance
-                        .map(|r| r.map(|x| f64::from(x) * cfg.velocity_cov_scale));
-                    rio.push_velocity(VelocityMeasurement {
-                        t: tr,
-                        velocity: e.velocity.map(f64::from),
-                        covariance: c,
-                    });
-                }
-                Status::Degenerate { .. } => res.ego_degenerate += 1,
-                Status::TooFewPoints { .. } => res.ego_too_few += 1,
-                Status::NoConsensus { .. } => {
-                    res.ego_no_consensus += 1;
-                    rejected_in_row += u32::from(healthy);
-                }
-            }
         }
-        let before = *rio.counters();
-        rio.push_imu(ImuSample {
+        runner.push_imu(ImuSample {
             t,
             accel: s.accel,
             gyro: s.gyro,
         });
-        let after = rio.counters();
-        if after.updates > before.updates {
-            rejected_in_row = 0;
-        } else if after.gated > before.gated {
-            rejected_in_row += 1;
-        }
-        for tr in outputs.drain(..) {
-            let st = rio.state();
-            // Body pose: T_wb = T_wi * T_ib.
-            let q = st.q * q_ib;
-            let p = st.p + st.q * t_ib;
-            res.trajectory.push(TumPose {
-                t: tr,
-                p: p.into(),
-                q: [q.i, q.j, q.k, q.w],
-            });
-        }
+        drain(&mut runner);
     }
-    res.updates = rio.counters().updates;
-    res.gated = rio.counters().gated;
-    Ok(res)
+    runner.finish();
+    drain(&mut runner);
+    let n = |x: u64| usize::try_from(x).unwrap_or(usize::MAX);
+    let c = *runner.counters();
+    let filter = runner.filter_counters();
+    Ok(OfflineResult {
+        trajectory,
+        radar: radar_rep,
+        imu: imu_rep,
+        radar_frames: frames.len(),
+        ego_ok: n(c.ego_ok),
+        ego_degenerate: n(c.ego_degenerate),
+        ego_too_few: n(c.ego_too_few),
+        ego_no_consensus: n(c.ego_no_consensus),
+        updates: filter.updates,
+        gated: filter.gated,
+        imu_samples: imu.len(),
+        radar_clock,
+        imu_clock,
+        clock_unsynced,
+    })
 }

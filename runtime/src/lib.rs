@@ -6,7 +6,8 @@
 pub mod composer;
 pub mod config;
 pub mod estimator;
-pub mod model;
+/// The learned-model estimator (also at [`estimator::model`], where it lives).
+pub use estimator::model;
 pub mod output;
 pub mod pipeline;
 pub mod queue;

@@ -1,31 +1,33 @@
 //! The learned milliEgo model as a runtime estimator: radar frames and IMU samples go through the
 //! shared window builder (`milliego_preprocess`, the code that built the training data), the model
-//! runs with tract on the keyframe chain (every `gap`-th radar frame: each window starts where the
-//! previous one ended) and returns the relative pose between the two keyframes.
+//! runs with tract on the keyframe chain ([`milliego_models::chain::KeyframeChain`], the chain the
+//! offline run uses: every `gap`-th radar frame, each window starting where the previous one
+//! ended) and returns the relative pose between the two keyframes.
+//!
+//! A model failure or an output that is not a finite pose is returned as an error (the stage then
+//! hands over to the fallback); after [`MAX_FAILURES`] in a row the estimator reports itself
+//! unhealthy.
 //!
 //! A window needs IMU samples past its current frame, which the synchroniser delivers after the
 //! frame, so the pose of keyframe n is published with radar frame n + 1 (one radar period later);
 //! the IMU-rate prediction fills the gap for AR consumers.
 
-use crate::estimator::{Estimator, EstimatorError, ImuInput, Mounting, RadarInput, RelativePose};
+use super::{Estimator, EstimatorError, ImuInput, Mounting, RadarInput, RelativePose};
+use milliego_models::chain::{ChainError, ChainStep, KeyframeChain};
 use milliego_models::Model;
-use milliego_preprocess::pose::from_label;
 use milliego_preprocess::window::{BuilderConfig, WindowBuilder};
-use nalgebra::{Isometry3, Vector3};
 
-/// Consecutive inference failures after which the estimator reports itself unhealthy.
-const MAX_FAILURES: u32 = 3;
+/// Consecutive failed windows (inference errors or non-finite outputs) after which the estimator
+/// reports itself unhealthy.
+pub const MAX_FAILURES: u32 = 3;
 
 /// The learned-model estimator.
 pub struct ModelEstimator {
     model: Model,
     builder: WindowBuilder,
-    /// Last keyframe: push sequence number, frame number, time, world pose (own composition,
-    /// for the velocity hint).
-    last: Option<(u64, u32, f64, Isometry3<f64>)>,
+    chain: KeyframeChain,
     failures: u32,
     unhealthy: Option<String>,
-    chain_breaks: u64,
 }
 
 impl std::fmt::Debug for ModelEstimator {
@@ -33,7 +35,7 @@ impl std::fmt::Debug for ModelEstimator {
         f.debug_struct("ModelEstimator")
             .field("model", &self.model.path())
             .field("steps", &self.model.steps())
-            .field("chain_breaks", &self.chain_breaks)
+            .field("chain", self.chain.counters())
             .field("unhealthy", &self.unhealthy)
             .finish()
     }
@@ -52,10 +54,9 @@ impl ModelEstimator {
         Ok(ModelEstimator {
             model,
             builder,
-            last: None,
+            chain: KeyframeChain::new(),
             failures: 0,
             unhealthy: None,
-            chain_breaks: 0,
         })
     }
 
@@ -66,51 +67,47 @@ impl ModelEstimator {
 
     /// Times the keyframe chain broke (a lost window) and the LSTM state was reset.
     pub fn chain_breaks(&self) -> u64 {
-        self.chain_breaks
+        self.chain.counters().chain_breaks
+    }
+
+    /// Windows whose output was not a finite pose.
+    pub fn bad_outputs(&self) -> u64 {
+        self.chain.counters().bad_outputs
     }
 
     fn next_pose(&mut self) -> Result<Option<RelativePose>, EstimatorError> {
         let mut out = None;
         while let Some(w) = self.builder.poll() {
-            let from = match self.last {
-                None => Isometry3::identity(),
-                Some((seq, _, _, pose)) if seq == w.prev_seq => pose,
-                Some((seq, _, _, pose)) if w.prev_seq > seq => {
-                    // The chain's next window never came (lost frame, IMU gap): restart the
-                    // chain here with a fresh state.
-                    self.chain_breaks += 1;
-                    self.model.reset();
-                    pose
-                }
-                Some(_) => continue, // off the keyframe chain
-            };
-            let label = match self.model.step(&w) {
-                Ok(l) => {
-                    self.failures = 0;
-                    l
-                }
+            let p = match self.chain.step(&mut self.model, &w) {
+                Ok(ChainStep::Pose(p)) => p,
+                Ok(ChainStep::OffChain) => continue,
                 Err(e) => {
                     self.failures += 1;
                     if self.failures >= MAX_FAILURES {
                         self.unhealthy = Some(e.to_string());
                     }
-                    return Err(EstimatorError::Unhealthy(e.to_string()));
+                    return Err(match e {
+                        ChainError::BadOutput {
+                            to_frame,
+                            t_to,
+                            output,
+                        } => EstimatorError::BadOutput {
+                            frame: to_frame,
+                            t: t_to,
+                            output,
+                        },
+                        ChainError::Model(e) => EstimatorError::Unhealthy(e.to_string()),
+                    });
                 }
             };
-            let rel = from_label(&label.map(f64::from))
-                .ok_or_else(|| EstimatorError::Unhealthy(format!("model output {label:?}")))?;
-            let pose = from * rel;
-            let dt = (w.t_cur - w.t_prev).max(1e-3);
-            // Mean velocity over the window, in the world frame at the current keyframe.
-            let v: Vector3<f64> = from.rotation * rel.translation.vector / dt;
-            self.last = Some((w.cur_seq, w.cur_frame, w.t_cur, pose));
+            self.failures = 0;
             out = Some(RelativePose {
-                from_frame: w.prev_frame,
-                to_frame: w.cur_frame,
-                t_from: w.t_prev,
-                t_to: w.t_cur,
-                rel,
-                velocity_world: Some(v),
+                from_frame: p.from_frame,
+                to_frame: p.to_frame,
+                t_from: p.t_from,
+                t_to: p.t_to,
+                rel: p.rel,
+                velocity_world: Some(p.velocity_world),
             });
         }
         Ok(out)

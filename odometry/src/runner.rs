@@ -1,0 +1,593 @@
+//! The classical radar-inertial loop, once, as a stream: IMU samples and radar frames go in one at
+//! a time (in time order, which the caller keeps), body poses at the radar frames come out.
+//!
+//! Both the offline runner ([`crate::offline::run`]) and the on-device runtime's `doppler` and
+//! `imu` estimators are loops over a [`Runner`], so what the filter does is written here only:
+//!
+//! * levelling: the attitude starts level from the mean specific force over the first
+//!   [`ClassicalConfig::level_window_s`] of IMU samples; samples and frames seen meanwhile are
+//!   kept and replayed when the filter starts (their poses then come out together);
+//! * priors: a frame's ego-velocity consensus is guided by the filter's predicted radar velocity
+//!   at the last IMU sample before the frame, but only while the filter is healthy
+//!   ([`guided`], the one health rule);
+//! * ego-velocity gating and the [`Rio`] updates (chi-square gate and velocity re-anchoring after
+//!   a run of gated measurements live in the filter);
+//! * IMU gaps: a frame more than [`ClassicalConfig::imu_gap_s`] after the last IMU sample is
+//!   dead-reckoned from its ego-velocity alone, and the filter re-anchors at the dead-reckoned
+//!   state when the IMU returns.
+//!
+//! Order: a frame may come either just before the first IMU sample at or past its time (the
+//! offline order) or just after it (the runtime synchroniser's order). Either way its prior is
+//! the filter's prediction at the last sample before it, and its pose is the filter state at the
+//! first sample at or past it with its update applied: at once in the runtime order, at that
+//! sample in the offline order.
+
+use crate::ego_velocity::{
+    Config as EgoConfig, Detection, EgoVelocityEstimator, Estimate, Prior, Status,
+};
+use crate::rio::{RadarMount, Rio, RioConfig, RioCounters, VelocityMeasurement};
+use crate::strapdown::{ImuSample, NavState};
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use radar_driver::tlv::Point;
+use std::collections::VecDeque;
+
+/// Radar updates the filter needs before its prediction may guide the ego-velocity consensus.
+pub const GUIDE_AFTER_UPDATES: u64 = 10;
+
+/// Consecutive rejected frames (gated by the filter, or no consensus under its prior) after which
+/// the prior stops guiding: a diverged filter's prior would only keep rejecting the truth.
+pub const MAX_REJECTED_IN_ROW: u32 = 3;
+
+/// IMU samples kept for levelling at most (the filter starts when the buffer is full).
+pub const LEVEL_CAPACITY: usize = 4096;
+
+/// Radar frames kept while levelling at most (later ones get no pose).
+pub const EARLY_CAPACITY: usize = 256;
+
+/// The health rule: whether a filter with `updates` applied radar updates and `rejected_in_row`
+/// frames rejected in a row may guide the next frame's ego-velocity with its prediction.
+pub fn guided(updates: u64, rejected_in_row: u32) -> bool {
+    updates >= GUIDE_AFTER_UPDATES && rejected_in_row < MAX_REJECTED_IN_ROW
+}
+
+/// Where the sensors sit on the body (body frame = the ground-truth body frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mounting {
+    /// IMU in the body frame (translation \[m\]).
+    pub imu: Isometry3<f64>,
+    /// Radar in the body frame (translation \[m\]).
+    pub radar: Isometry3<f64>,
+}
+
+impl Default for Mounting {
+    fn default() -> Self {
+        Mounting {
+            imu: Isometry3::identity(),
+            radar: Isometry3::identity(),
+        }
+    }
+}
+
+impl Mounting {
+    /// From a session's extrinsics.
+    pub fn from_session(e: &milliego_session::Extrinsics) -> Mounting {
+        let iso = |x: &milliego_session::Extrinsic| {
+            let [w, i, j, k] = x.rotation_wxyz;
+            Isometry3::from_parts(
+                Translation3::from(Vector3::from(x.translation_m)),
+                UnitQuaternion::from_quaternion(Quaternion::new(w, i, j, k)),
+            )
+        };
+        Mounting {
+            imu: iso(&e.imu),
+            radar: iso(&e.radar),
+        }
+    }
+}
+
+/// Settings of the classical estimators.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClassicalConfig {
+    /// Filter settings.
+    pub rio: RioConfig,
+    /// Ego-velocity settings.
+    pub ego: EgoConfig,
+    /// Time at the start used to level the attitude from gravity \[s\].
+    pub level_window_s: f64,
+    /// Factor on the ego-velocity covariance before the filter takes it: the least-squares
+    /// covariance ignores direction errors (angular resolution) and ghost points that slip into
+    /// the consensus of a sparse frame.
+    pub velocity_cov_scale: f64,
+    /// Sensor placement.
+    pub mounting: Mounting,
+    /// IMU silent for longer than this before a radar frame: the frame is dead-reckoned from
+    /// its ego-velocity alone and the filter restarts when the IMU returns \[s\]
+    /// (`f64::INFINITY`: never).
+    pub imu_gap_s: f64,
+}
+
+impl Default for ClassicalConfig {
+    fn default() -> Self {
+        ClassicalConfig {
+            rio: RioConfig::default(),
+            ego: EgoConfig::default(),
+            level_window_s: 1.0,
+            velocity_cov_scale: 1.0,
+            mounting: Mounting::default(),
+            imu_gap_s: 0.1,
+        }
+    }
+}
+
+/// One radar frame for the runner.
+#[derive(Debug, Clone, Copy)]
+pub struct FrameInput<'a> {
+    /// Measurement time on the IMU's clock \[s\].
+    pub t: f64,
+    /// The caller's name for the frame (echoed in its [`FramePose`]).
+    pub id: u64,
+    /// Points (radar frame: x right, y boresight, z up \[m\]; radial velocity \[m/s\]).
+    pub points: &'a [Point],
+}
+
+/// The body pose at a radar frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FramePose {
+    /// [`FrameInput::id`] of the frame.
+    pub id: u64,
+    /// Its time \[s\].
+    pub t: f64,
+    /// Body pose in the world frame (the levelled start; translation \[m\]).
+    pub body: Isometry3<f64>,
+    /// Body velocity in the world frame \[m/s\].
+    pub velocity_world: Vector3<f64>,
+}
+
+/// What the runner did with its inputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RunnerCounters {
+    /// Frames with a usable ego-velocity.
+    pub ego_ok: u64,
+    /// Frames whose geometry could not determine the velocity.
+    pub ego_degenerate: u64,
+    /// Frames with too few points.
+    pub ego_too_few: u64,
+    /// Frames without consensus.
+    pub ego_no_consensus: u64,
+    /// Frames dead-reckoned without the IMU.
+    pub dead_reckoned: u64,
+    /// Times the filter re-anchored at the dead-reckoned state after an IMU gap.
+    pub imu_restarts: u64,
+    /// Frames seen while levelling beyond [`EARLY_CAPACITY`] (no pose).
+    pub early_dropped: u64,
+}
+
+/// Radar frame seen while levelling, measured and applied once the filter starts.
+#[derive(Debug, Clone)]
+struct Early {
+    t: f64,
+    id: u64,
+    dets: Vec<Detection>,
+}
+
+/// The filter's prediction just before the latest IMU sample: the prior of a frame that comes
+/// after the first sample at or past its time.
+#[derive(Debug, Clone, Copy)]
+struct Before {
+    prior: ([f64; 3], [[f64; 3]; 3]),
+    updates: u64,
+}
+
+/// Doppler radar-inertial odometry (or, without radar, IMU dead reckoning) over a stream.
+#[derive(Debug)]
+pub struct Runner {
+    cfg: ClassicalConfig,
+    use_radar: bool,
+    mount: RadarMount,
+    q_ib: UnitQuaternion<f64>,
+    t_ib: Vector3<f64>,
+    rio: Option<Rio>,
+    level: Vec<ImuSample>,
+    early: Vec<Early>,
+    ego: EgoVelocityEstimator,
+    est: Estimate,
+    dets: Vec<Detection>,
+    before: Option<Before>,
+    rejected_in_row: u32,
+    last_imu_t: Option<f64>,
+    // Radar-only dead reckoning while the IMU is missing.
+    dr: Option<NavState>,
+    // Frames measured ahead of the IMU: their pose is the state at the first sample past them.
+    waiting: VecDeque<(u64, f64)>,
+    out: VecDeque<FramePose>,
+    counters: RunnerCounters,
+}
+
+impl Runner {
+    /// Doppler radar-inertial odometry (`use_radar`), or IMU dead reckoning with poses at the
+    /// radar frames' times (no radar updates).
+    pub fn new(cfg: &ClassicalConfig, use_radar: bool) -> Runner {
+        let q_bi = cfg.mounting.imu.rotation;
+        let t_bi = cfg.mounting.imu.translation.vector;
+        let q_br = cfg.mounting.radar.rotation;
+        let t_br = cfg.mounting.radar.translation.vector;
+        // The filter runs in the IMU frame.
+        let mount = RadarMount {
+            rotation: q_bi.inverse() * q_br,
+            translation: q_bi.inverse() * (t_br - t_bi),
+        };
+        Runner {
+            cfg: *cfg,
+            use_radar,
+            mount,
+            q_ib: q_bi.inverse(),
+            t_ib: -(q_bi.inverse() * t_bi),
+            rio: None,
+            level: Vec::with_capacity(LEVEL_CAPACITY),
+            early: Vec::with_capacity(EARLY_CAPACITY),
+            ego: EgoVelocityEstimator::new(cfg.ego),
+            est: Estimate {
+                velocity: [0.0; 3],
+                covariance: [[0.0; 3]; 3],
+                status: Status::Ok,
+                inliers: 0,
+                usable: 0,
+                skipped: 0,
+                residual_rms: 0.0,
+                inlier_mask: Vec::with_capacity(1024),
+                iterations: 0,
+            },
+            dets: Vec::with_capacity(1024),
+            before: None,
+            rejected_in_row: 0,
+            last_imu_t: None,
+            dr: None,
+            waiting: VecDeque::with_capacity(64),
+            out: VecDeque::with_capacity(EARLY_CAPACITY + 64),
+            counters: RunnerCounters::default(),
+        }
+    }
+
+    /// Whether radar frames update the filter (Doppler) or only mark pose times (IMU only).
+    pub fn uses_radar(&self) -> bool {
+        self.use_radar
+    }
+
+    /// True once levelling is over and the filter runs.
+    pub fn started(&self) -> bool {
+        self.rio.is_some()
+    }
+
+    /// The filter, once levelled.
+    pub fn filter(&self) -> Option<&Rio> {
+        self.rio.as_ref()
+    }
+
+    /// Filter counters (all zero before the filter starts; reset when it re-anchors after an IMU
+    /// gap).
+    pub fn filter_counters(&self) -> RioCounters {
+        self.rio.as_ref().map(|r| *r.counters()).unwrap_or_default()
+    }
+
+    /// What the runner did.
+    pub fn counters(&self) -> &RunnerCounters {
+        &self.counters
+    }
+
+    /// Frames rejected in a row (see [`MAX_REJECTED_IN_ROW`]).
+    pub fn rejected_in_row(&self) -> u32 {
+        self.rejected_in_row
+    }
+
+    /// True when the filter's prediction would guide a frame now ([`guided`]).
+    pub fn guiding(&self) -> bool {
+        self.rio
+            .as_ref()
+            .is_some_and(|r| guided(r.counters().updates, self.rejected_in_row))
+    }
+
+    /// Time \[s\], body pose in the world frame and world velocity \[m/s\] of the current state
+    /// (the dead-reckoned one during an IMU gap).
+    pub fn body_state(&self) -> Option<(f64, Isometry3<f64>, Vector3<f64>)> {
+        let st = match (&self.dr, &self.rio) {
+            (Some(d), _) => *d,
+            (None, Some(r)) => *r.state(),
+            _ => return None,
+        };
+        Some((st.t, self.body(&st), st.v))
+    }
+
+    /// The next frame pose, oldest first.
+    pub fn pop_pose(&mut self) -> Option<FramePose> {
+        self.out.pop_front()
+    }
+
+    /// One IMU sample (IMU frame: specific force \[m/s^2\], rate of turn \[rad/s\]; time \[s\]).
+    pub fn push_imu(&mut self, s: ImuSample) {
+        self.last_imu_t = Some(s.t);
+        if let Some(d) = self.dr.take() {
+            // The IMU is back after a gap the radar bridged: re-anchor a fresh filter at the
+            // dead-reckoned state (tilt and biases re-learned, the pose kept).
+            let st = NavState { t: s.t, ..d };
+            self.rio = Some(Rio::new(self.cfg.rio, self.mount, st));
+            self.counters.imu_restarts += 1;
+        }
+        if self.rio.is_none() {
+            if self.level.is_empty() {
+                // Frames before the first sample get no pose (there is no filter time yet).
+                self.early.retain(|e| e.t >= s.t);
+            }
+            // Level over the samples within the window of the first one.
+            let past = self
+                .level
+                .first()
+                .is_some_and(|f| s.t - f.t > self.cfg.level_window_s);
+            if !past && self.level.len() < LEVEL_CAPACITY {
+                self.level.push(s);
+                return;
+            }
+            self.start_filter();
+        }
+        let Some(rio) = self.rio.as_ref() else {
+            return;
+        };
+        self.before = Some(Before {
+            prior: rio.predicted_radar_velocity(),
+            updates: rio.counters().updates,
+        });
+        self.filter_imu(s);
+        while let Some(&(id, t)) = self.waiting.front() {
+            if t > s.t {
+                break;
+            }
+            self.waiting.pop_front();
+            self.emit(id, t);
+        }
+    }
+
+    /// One radar frame. Its pose comes out of [`Runner::pop_pose`] now (a frame at or behind the
+    /// latest IMU sample, or dead-reckoned across an IMU gap), at the first IMU sample at or past
+    /// it (a frame ahead of the IMU), or when levelling ends (a frame seen while levelling).
+    pub fn push_radar(&mut self, f: &FrameInput<'_>) {
+        if self.rio.is_none() {
+            if self.early.len() < EARLY_CAPACITY {
+                let dets = if self.use_radar {
+                    f.points.iter().map(detection).collect()
+                } else {
+                    Vec::new()
+                };
+                self.early.push(Early {
+                    t: f.t,
+                    id: f.id,
+                    dets,
+                });
+            } else {
+                self.counters.early_dropped += 1;
+            }
+            return;
+        }
+        self.dets.clear();
+        if self.use_radar {
+            self.dets.extend(f.points.iter().map(detection));
+        }
+        if self.last_imu_t.is_none_or(|t| f.t - t > self.cfg.imu_gap_s) {
+            self.dead_reckon(f.t);
+            self.emit(f.id, f.t);
+            return;
+        }
+        let behind = self.last_imu_t.is_some_and(|t| t >= f.t);
+        if self.use_radar {
+            // The prediction at the last sample before the frame: the one before the latest
+            // sample when the frame is behind it.
+            let prior = if behind {
+                self.before
+                    .filter(|b| guided(b.updates, self.rejected_in_row))
+                    .map(|b| b.prior)
+            } else {
+                self.current_prior()
+            };
+            let dets = std::mem::take(&mut self.dets);
+            self.radar_update(f.t, &dets, prior);
+            self.dets = dets;
+        }
+        if behind {
+            self.emit(f.id, f.t);
+        } else {
+            self.waiting.push_back((f.id, f.t));
+        }
+    }
+
+    /// The end of the stream: a filter still levelling starts now (over every sample seen), and
+    /// the poses of the frames seen while levelling come out.
+    pub fn finish(&mut self) {
+        if self.rio.is_none() && !self.level.is_empty() {
+            self.start_filter();
+        }
+    }
+
+    fn body(&self, st: &NavState) -> Isometry3<f64> {
+        // T_wb = T_wi * T_ib.
+        let q = st.q * self.q_ib;
+        let p = st.p + st.q * self.t_ib;
+        Isometry3::from_parts(Translation3::from(p), q)
+    }
+
+    fn emit(&mut self, id: u64, t: f64) {
+        if let Some((_, body, velocity_world)) = self.body_state() {
+            self.out.push_back(FramePose {
+                id,
+                t,
+                body,
+                velocity_world,
+            });
+        }
+    }
+
+    /// The filter's prior for a frame now, when it is healthy.
+    fn current_prior(&self) -> Option<([f64; 3], [[f64; 3]; 3])> {
+        let rio = self.rio.as_ref()?;
+        guided(rio.counters().updates, self.rejected_in_row).then(|| rio.predicted_radar_velocity())
+    }
+
+    /// Counts a change of the filter's counters into the rejection run: an applied update ends
+    /// it, a gated one extends it.
+    fn track(&mut self, before: RioCounters, after: RioCounters) {
+        if after.updates > before.updates {
+            self.rejected_in_row = 0;
+        } else if after.gated > before.gated {
+            self.rejected_in_row += 1;
+        }
+    }
+
+    fn filter_imu(&mut self, s: ImuSample) {
+        let Some(rio) = self.rio.as_mut() else {
+            return;
+        };
+        let before = *rio.counters();
+        rio.push_imu(s);
+        let after = *rio.counters();
+        self.track(before, after);
+    }
+
+    /// The ego-velocity of `dets` guided by `prior` (status counted).
+    fn measure(
+        &mut self,
+        t: f64,
+        dets: &[Detection],
+        prior: Option<Prior>,
+    ) -> Option<VelocityMeasurement> {
+        self.ego.estimate_guided_into(dets, prior, &mut self.est);
+        match self.est.status {
+            Status::Ok => {
+                self.counters.ego_ok += 1;
+                let s = self.cfg.velocity_cov_scale;
+                Some(VelocityMeasurement {
+                    t,
+                    velocity: self.est.velocity.map(f64::from),
+                    covariance: self.est.covariance.map(|r| r.map(|x| f64::from(x) * s)),
+                })
+            }
+            Status::Degenerate { .. } => {
+                self.counters.ego_degenerate += 1;
+                None
+            }
+            Status::TooFewPoints { .. } => {
+                self.counters.ego_too_few += 1;
+                None
+            }
+            Status::NoConsensus { .. } => {
+                self.counters.ego_no_consensus += 1;
+                None
+            }
+        }
+    }
+
+    /// Ego-velocity of a frame at `t` \[s\] guided by `prior`, pushed into the filter (applied at
+    /// once when the filter is past `t`, else at the first sample at or past it).
+    fn radar_update(
+        &mut self,
+        t: f64,
+        dets: &[Detection],
+        prior: Option<([f64; 3], [[f64; 3]; 3])>,
+    ) {
+        let gate = self.cfg.rio.gate;
+        let prior = prior.map(|(velocity, covariance)| Prior {
+            velocity,
+            covariance,
+            gate,
+        });
+        let guided_now = prior.is_some();
+        let m = self.measure(t, dets, prior);
+        if let (Some(m), Some(rio)) = (m, self.rio.as_mut()) {
+            let before = *rio.counters();
+            rio.push_velocity(m);
+            let after = *rio.counters();
+            self.track(before, after);
+        }
+        if matches!(self.est.status, Status::NoConsensus { .. }) {
+            // No consensus under the prior: the frame disagrees with the filter.
+            self.rejected_in_row += u32::from(guided_now);
+        }
+    }
+
+    /// No IMU: hold the attitude, integrate the radar velocity to `t` \[s\].
+    fn dead_reckon(&mut self, t: f64) {
+        let Some(rio) = self.rio.as_ref() else {
+            return;
+        };
+        let mut st = self.dr.unwrap_or(*rio.state());
+        if self.use_radar {
+            let dets = std::mem::take(&mut self.dets);
+            let m = self.measure(t, &dets, None);
+            self.dets = dets;
+            if let Some(m) = m {
+                // The radar's own velocity in its frame (lever arm neglected without gyro).
+                let v_i = self.mount.rotation * Vector3::from(m.velocity);
+                st.v = st.q * v_i;
+            }
+        }
+        let dt = (t - st.t).max(0.0);
+        st.p += st.v * dt;
+        st.t = t;
+        self.dr = Some(st);
+        self.counters.dead_reckoned += 1;
+    }
+
+    /// Levels the filter from the buffered samples and replays them with the frames seen
+    /// meanwhile, in the offline order: the frames due at or before a sample go first, measured
+    /// with the prior the filter has at that point; their poses are the state after that sample.
+    fn start_filter(&mut self) {
+        let Some(first) = self.level.first() else {
+            return;
+        };
+        let t0 = first.t;
+        let n = self.level.len().max(1) as f64;
+        let mean_f = self
+            .level
+            .iter()
+            .fold(Vector3::zeros(), |a, s| a + Vector3::from(s.accel))
+            / n;
+        self.rio = Some(Rio::levelled(self.cfg.rio, self.mount, t0, mean_f.into()));
+        let early = std::mem::take(&mut self.early);
+        let level = std::mem::take(&mut self.level);
+        let mut next = 0;
+        for s in &level {
+            let from = next;
+            while next < early.len() && early[next].t <= s.t {
+                let e = &early[next];
+                next += 1;
+                if e.t < t0 || !self.use_radar {
+                    continue;
+                }
+                let prior = self.current_prior();
+                self.radar_update(e.t, &e.dets, prior);
+            }
+            self.filter_imu(*s);
+            for e in &early[from..next] {
+                if e.t >= t0 {
+                    self.emit(e.id, e.t);
+                }
+            }
+        }
+        // Frames after the last buffered sample (offline order: they came before the sample that
+        // ended levelling): measured now, their poses at the next sample.
+        for e in &early[next..] {
+            if self.use_radar {
+                let prior = self.current_prior();
+                self.radar_update(e.t, &e.dets, prior);
+            }
+            self.waiting.push_back((e.id, e.t));
+        }
+        self.early = early;
+        self.early.clear();
+        self.level = level;
+        self.level.clear();
+    }
+}
+
+fn detection(p: &Point) -> Detection {
+    Detection {
+        position: [p.x, p.y, p.z],
+        radial_velocity: p.velocity,
+    }
+}

@@ -1,0 +1,225 @@
+//! The streaming classical runner on synthetic streams (a stationary rig looking at a static
+//! scene): the health rule withdraws the prior after a run of rejected frames and the filter
+//! re-anchors, both input orders (offline: a frame before the first IMU sample past it; runtime:
+//! after it) give the same poses, and an IMU gap is bridged by radar dead reckoning.
+
+use milliego_odometry::runner::{
+    guided, ClassicalConfig, FrameInput, FramePose, Runner, GUIDE_AFTER_UPDATES,
+    MAX_REJECTED_IN_ROW,
+};
+use milliego_odometry::strapdown::{ImuSample, STANDARD_GRAVITY};
+use radar_driver::tlv::Point;
+
+const IMU_DT: f64 = 0.01;
+const RADAR_DT: f64 = 0.1;
+/// Radar frames fall between IMU samples.
+const RADAR_OFFSET: f64 = 0.0037;
+
+fn imu(k: usize) -> ImuSample {
+    ImuSample {
+        t: k as f64 * IMU_DT,
+        accel: [0.0, 0.0, STANDARD_GRAVITY],
+        gyro: [0.0; 3],
+    }
+}
+
+/// A static scene seen by a radar moving at `v` (radar frame) \[m/s\]: `v_r = -d . v`.
+fn scene(v: [f32; 3]) -> Vec<Point> {
+    let mut pts = Vec::new();
+    for az in -4i32..=4 {
+        for el in -2..=2 {
+            let (a, e) = (az as f32 * 0.25, el as f32 * 0.15);
+            let d = [a.sin() * e.cos(), a.cos() * e.cos(), e.sin()];
+            let r = 3.0 + (az + el).rem_euclid(4) as f32;
+            pts.push(Point {
+                x: d[0] * r,
+                y: d[1] * r,
+                z: d[2] * r,
+                velocity: -(d[0] * v[0] + d[1] * v[1] + d[2] * v[2]),
+            });
+        }
+    }
+    pts
+}
+
+fn frame_t(n: usize) -> f64 {
+    n as f64 * RADAR_DT + RADAR_OFFSET
+}
+
+#[test]
+fn the_health_rule() {
+    assert!(!guided(GUIDE_AFTER_UPDATES - 1, 0));
+    assert!(guided(GUIDE_AFTER_UPDATES, 0));
+    assert!(guided(GUIDE_AFTER_UPDATES, MAX_REJECTED_IN_ROW - 1));
+    assert!(!guided(GUIDE_AFTER_UPDATES, MAX_REJECTED_IN_ROW));
+}
+
+/// Feeds `seconds` of stationary IMU and radar frames (`points(n)` for frame n) in the runtime
+/// order (a frame right after the first IMU sample past it); `check(n, runner)` after each frame.
+fn feed(
+    runner: &mut Runner,
+    seconds: f64,
+    points: impl Fn(usize) -> Vec<Point>,
+    mut check: impl FnMut(usize, &Runner),
+) -> Vec<FramePose> {
+    let mut poses = Vec::new();
+    let mut n = 0;
+    for k in 0..(seconds / IMU_DT) as usize {
+        let s = imu(k);
+        runner.push_imu(s);
+        while frame_t(n) <= s.t {
+            let pts = points(n);
+            runner.push_radar(&FrameInput {
+                t: frame_t(n),
+                id: n as u64,
+                points: &pts,
+            });
+            check(n, runner);
+            n += 1;
+        }
+        while let Some(p) = runner.pop_pose() {
+            poses.push(p);
+        }
+    }
+    poses
+}
+
+#[test]
+fn rejected_frames_withdraw_the_prior_and_the_filter_re_anchors() {
+    let mut r = Runner::new(&ClassicalConfig::default(), true);
+    // 4 s at rest, then the radar insists on 3 m/s forward (far outside the filter's gate).
+    let bad_from = 40;
+    let mut guided_at_bad = None;
+    let mut withdrawn_at = None;
+    let mut regained_at = None;
+    feed(
+        &mut r,
+        8.0,
+        |n| {
+            scene(if n < bad_from {
+                [0.0; 3]
+            } else {
+                [0.0, 3.0, 0.0]
+            })
+        },
+        |n, r| {
+            if n + 1 == bad_from {
+                guided_at_bad = Some(r.guiding());
+            }
+            if n >= bad_from && withdrawn_at.is_none() && !r.guiding() {
+                withdrawn_at = Some(n);
+                assert_eq!(r.rejected_in_row(), MAX_REJECTED_IN_ROW, "frame {n}");
+            }
+            if withdrawn_at.is_some() && regained_at.is_none() && r.guiding() {
+                regained_at = Some(n);
+            }
+        },
+    );
+    assert_eq!(
+        guided_at_bad,
+        Some(true),
+        "healthy after levelling and 10 updates"
+    );
+    let withdrawn_at = withdrawn_at.expect("the prior is withdrawn");
+    assert_eq!(
+        withdrawn_at,
+        bad_from + MAX_REJECTED_IN_ROW as usize - 1,
+        "withdrawn after {MAX_REJECTED_IN_ROW} rejected frames"
+    );
+    let c = r.filter_counters();
+    assert!(c.reanchors >= 1, "{c:?}");
+    assert!(
+        regained_at.is_some(),
+        "guided again once the filter re-anchored"
+    );
+    // The filter follows the radar after re-anchoring.
+    let (_, _, v) = r.body_state().unwrap();
+    assert!((v.norm() - 3.0).abs() < 0.3, "velocity {v:?}");
+}
+
+#[test]
+fn offline_and_runtime_order_give_the_same_poses() {
+    let cfg = ClassicalConfig::default();
+    let points = |n: usize| scene([0.0, 0.2 * (n as f32 * 0.1).sin(), 0.0]);
+    let runtime = feed(&mut Runner::new(&cfg, true), 4.0, points, |_, _| {});
+    // Offline order: each frame before the first sample at or past it.
+    let mut r = Runner::new(&cfg, true);
+    let mut offline = Vec::new();
+    let mut n = 0;
+    for k in 0..(4.0 / IMU_DT) as usize {
+        let s = imu(k);
+        while frame_t(n) <= s.t {
+            let pts = points(n);
+            r.push_radar(&FrameInput {
+                t: frame_t(n),
+                id: n as u64,
+                points: &pts,
+            });
+            n += 1;
+        }
+        r.push_imu(s);
+        while let Some(p) = r.pop_pose() {
+            offline.push(p);
+        }
+    }
+    r.finish();
+    // The runtime order has the frames up to the last sample; the offline order those before it.
+    assert!(runtime.len() >= 35, "{} poses", runtime.len());
+    assert_eq!(offline.len(), runtime.len());
+    for (a, b) in offline.iter().zip(&runtime) {
+        assert_eq!((a.id, a.t), (b.id, b.t));
+        assert_eq!(a.body, b.body, "frame {}", a.id);
+    }
+    // Levelling frames come out when the filter starts, every later one once.
+    assert_eq!(offline[0].id, 0);
+    assert!(offline.windows(2).all(|w| w[1].id == w[0].id + 1));
+}
+
+#[test]
+fn an_imu_gap_is_dead_reckoned_and_the_filter_re_anchors_after_it() {
+    let mut r = Runner::new(&ClassicalConfig::default(), true);
+    let v = [0.0, 0.5, 0.0];
+    feed(&mut r, 3.0, |_| scene([0.0; 3]), |_, _| {});
+    // The last sample is at 2.99 s: frame 30 (3.0037 s) is ahead of the IMU but within
+    // `imu_gap_s`, so its pose waits for the next sample.
+    let pts = scene(v);
+    r.push_radar(&FrameInput {
+        t: frame_t(30),
+        id: 30,
+        points: &pts,
+    });
+    assert_eq!(r.pop_pose(), None);
+    let (t_before, before, _) = r.body_state().unwrap();
+    // 1 s without IMU: frames at 10 Hz.
+    let mut gap_poses = 0;
+    for n in 31..41 {
+        let pts = scene(v);
+        r.push_radar(&FrameInput {
+            t: frame_t(n),
+            id: n as u64,
+            points: &pts,
+        });
+        while let Some(p) = r.pop_pose() {
+            assert_eq!(p.id, n as u64, "a dead-reckoned frame's pose at once");
+            gap_poses += 1;
+        }
+    }
+    assert_eq!(gap_poses, 10);
+    assert_eq!(r.counters().dead_reckoned, 10);
+    let (t_after, after, _) = r.body_state().unwrap();
+    let moved = (after.translation.vector - before.translation.vector).norm();
+    let expect = 0.5 * (t_after - t_before);
+    assert!(
+        (moved - expect).abs() < 0.05,
+        "{moved} m, expected {expect}"
+    );
+    r.push_imu(imu(400));
+    assert_eq!(r.counters().imu_restarts, 1);
+    assert_eq!(
+        r.filter_counters().updates,
+        0,
+        "a fresh filter after the gap"
+    );
+    let (_, restarted, _) = r.body_state().unwrap();
+    assert_eq!(restarted.translation, after.translation, "the pose is kept");
+}

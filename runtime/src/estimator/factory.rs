@@ -1,0 +1,103 @@
+//! The one place estimators are built: the classical ones, the learned model, and for `auto` the
+//! pair of them (model first, Doppler beside it as the fallback).
+
+use super::{Classical, ClassicalConfig, Estimator, EstimatorKind, ModelEstimator};
+
+/// Why an estimator could not be built.
+#[derive(Debug, Clone, PartialEq)]
+pub enum BuildError {
+    /// No model file was given.
+    ModelUnavailable,
+    /// The model file could not be loaded.
+    BadModel(String),
+}
+
+impl std::fmt::Display for BuildError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            BuildError::ModelUnavailable => {
+                write!(
+                    f,
+                    "the learned-model estimator needs a model file (--model PATH)"
+                )
+            }
+            BuildError::BadModel(why) => write!(f, "cannot load the model: {why}"),
+        }
+    }
+}
+
+impl std::error::Error for BuildError {}
+
+/// The estimators of a run: the primary one, and for `auto` the fallback beside it.
+pub struct Built {
+    /// The estimator that produces poses while healthy.
+    pub primary: Box<dyn Estimator>,
+    /// Fallback used when the primary is unavailable or unhealthy (`auto` only).
+    pub fallback: Option<Box<dyn Estimator>>,
+    /// True when `auto` could not get the model (poses carry MODEL_FALLBACK).
+    pub model_fallback: bool,
+}
+
+impl std::fmt::Debug for Built {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Built")
+            .field("primary", &self.primary.name())
+            .field("fallback", &self.fallback.as_ref().map(|e| e.name()))
+            .field("model_fallback", &self.model_fallback)
+            .finish()
+    }
+}
+
+/// Builds one estimator of `kind`. The single place where estimators are made: the learned
+/// model joins here (`model_path` is its file).
+pub fn build_estimator(
+    kind: EstimatorKind,
+    cfg: &ClassicalConfig,
+    model_path: Option<&std::path::Path>,
+) -> Result<Box<dyn Estimator>, BuildError> {
+    match kind {
+        EstimatorKind::Doppler => Ok(Box::new(Classical::doppler(*cfg))),
+        EstimatorKind::Imu => Ok(Box::new(Classical::imu_only(*cfg))),
+        EstimatorKind::Model => {
+            let path = model_path.ok_or(BuildError::ModelUnavailable)?;
+            ModelEstimator::load(path, &cfg.mounting)
+                .map(|m| Box::new(m) as Box<dyn Estimator>)
+                .map_err(BuildError::BadModel)
+        }
+        EstimatorKind::Auto => match build_estimator(EstimatorKind::Model, cfg, model_path) {
+            Ok(m) => Ok(m),
+            Err(_) => build_estimator(EstimatorKind::Doppler, cfg, model_path),
+        },
+    }
+}
+
+/// The estimators for a run of `kind`: `auto` tries the model and falls back to Doppler
+/// (MODEL_FALLBACK on every pose) when it is unavailable; a fixed kind fails at start-up.
+pub fn build_run_estimators(
+    kind: EstimatorKind,
+    cfg: &ClassicalConfig,
+    model_path: Option<&std::path::Path>,
+) -> Result<Built, BuildError> {
+    match kind {
+        EstimatorKind::Auto => match build_estimator(EstimatorKind::Model, cfg, model_path) {
+            Ok(m) => Ok(Built {
+                primary: m,
+                fallback: Some(build_estimator(EstimatorKind::Doppler, cfg, None)?),
+                model_fallback: false,
+            }),
+            Err(BuildError::BadModel(why)) if model_path.is_some() => {
+                Err(BuildError::BadModel(why))
+            }
+            Err(_) => Ok(Built {
+                primary: build_estimator(EstimatorKind::Doppler, cfg, None)?,
+                fallback: None,
+                model_fallback: true,
+            }),
+        },
+        k => Ok(Built {
+            primary: build_estimator(k, cfg, model_path)?,
+            fallback: None,
+            model_fallback: false,
+        }),
+    }
+}
