@@ -145,6 +145,22 @@ pub struct Estimate {
 }
 
 impl Estimate {
+    /// An empty estimate whose inlier mask holds `points` without growing (for
+    /// [`EgoVelocityEstimator::estimate_guided_into`]).
+    pub fn with_capacity(points: usize) -> Estimate {
+        Estimate {
+            velocity: [0.0; 3],
+            covariance: [[0.0; 3]; 3],
+            status: Status::Ok,
+            inliers: 0,
+            usable: 0,
+            skipped: 0,
+            residual_rms: 0.0,
+            inlier_mask: Vec::with_capacity(points),
+            iterations: 0,
+        }
+    }
+
     /// True for a usable full estimate.
     pub fn is_ok(&self) -> bool {
         self.status == Status::Ok
@@ -192,17 +208,7 @@ impl EgoVelocityEstimator {
     /// returned velocity and covariance come from the radar points alone, so a filter can fuse
     /// them without counting its own prediction twice.
     pub fn estimate_guided(&mut self, detections: &[Detection], prior: Option<Prior>) -> Estimate {
-        let mut est = Estimate {
-            velocity: [0.0; 3],
-            covariance: [[0.0; 3]; 3],
-            status: Status::Ok,
-            inliers: 0,
-            usable: 0,
-            skipped: 0,
-            residual_rms: 0.0,
-            inlier_mask: Vec::new(),
-            iterations: 0,
-        };
+        let mut est = Estimate::with_capacity(0);
         self.estimate_guided_into(detections, prior, &mut est);
         est
     }

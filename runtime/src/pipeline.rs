@@ -881,16 +881,8 @@ fn feed_session(
         let mut it = sh.pool.take();
         it.host_s = f.host_s.unwrap_or(tr);
         it.read_ns = sh.now_ns();
-        it.sensor_s = f.sensor_s;
-        it.frame_number = f.frame_number;
-        it.bytes = f.bytes;
-        it.processing_s = f
-            .cloud
-            .stats
-            .map_or(0.0, |s| f64::from(s.inter_frame_processing_time_us) * 1e-6);
+        it.set_frame(f.sensor_s, f.frame_number, f.bytes, &f.cloud);
         it.t = (!online_clock).then_some(tr);
-        it.points.clear();
-        it.points.extend_from_slice(&f.cloud.points);
         sh.radar_q.push_wait(it);
         decoded[0].fetch_add(1, Ordering::Relaxed);
         sh.watermark.store(tr.to_bits(), Ordering::Release);

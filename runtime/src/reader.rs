@@ -5,7 +5,7 @@
 use crate::queue::{DropOldest, Pool};
 use imu_driver::host::ImuDecodeReport;
 use imu_driver::TimeWrap;
-use radar_driver::host::{DecodeReport, Decoded, Decoder, DecoderConfig, Point};
+use radar_driver::host::{DecodeReport, Decoded, Decoder, DecoderConfig, Point, PointCloud};
 use radar_driver::plausible::{CheckCounters, IMPLAUSIBLE_KINDS};
 use std::io::{self, Read};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -34,6 +34,27 @@ pub struct RadarItem {
     pub t: Option<f64>,
     /// Points.
     pub points: Vec<Point>,
+}
+
+impl RadarItem {
+    /// Sets what the frame itself says (sensor time, number, length, processing time, points),
+    /// reusing the point buffer; host times and `t` are the caller's.
+    pub fn set_frame(
+        &mut self,
+        sensor_s: Option<f64>,
+        frame_number: u32,
+        bytes: usize,
+        cloud: &PointCloud,
+    ) {
+        self.sensor_s = sensor_s;
+        self.frame_number = frame_number;
+        self.bytes = bytes;
+        self.processing_s = cloud
+            .stats
+            .map_or(0.0, |s| f64::from(s.inter_frame_processing_time_us) * 1e-6);
+        self.points.clear();
+        self.points.extend_from_slice(&cloud.points);
+    }
 }
 
 impl Default for RadarItem {
@@ -152,16 +173,8 @@ impl RadarDecoder {
 
 fn fill(it: &mut RadarItem, f: &Decoded<'_, (f64, u64)>) {
     (it.host_s, it.read_ns) = f.stamp;
-    it.sensor_s = f.sensor_s;
-    it.frame_number = f.frame_number;
-    it.bytes = f.bytes;
-    it.processing_s = f
-        .cloud
-        .stats
-        .map_or(0.0, |s| f64::from(s.inter_frame_processing_time_us) * 1e-6);
+    it.set_frame(f.sensor_s, f.frame_number, f.bytes, f.cloud);
     it.t = None;
-    it.points.clear();
-    it.points.extend_from_slice(&f.cloud.points);
 }
 
 /// The live IMU decoder: the drivers' streaming [`imu_driver::host::Decoder`], the same that
