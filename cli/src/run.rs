@@ -208,7 +208,7 @@ pub fn run(a: RunArgs) -> Result<()> {
         signal_hook::flag::register(sig, Arc::clone(&stop))?;
     }
     let summary = run_pipeline(&input, &cfg, stop)?;
-    let text = serde_json::to_string_pretty(&summary.json)?;
+    let text = serde_json::to_string_pretty(&summary.report)?;
     eprintln!("{text}");
     if let Some(p) = a.summary_json.as_ref().or(file.summary_json.as_ref()) {
         std::fs::write(p, &text).map_err(|e| format!("{}: {e}", p.display()))?;

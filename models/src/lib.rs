@@ -78,6 +78,13 @@ pub enum ModelError {
         /// What differs.
         why: String,
     },
+    /// The metadata names a preprocessing setting this build cannot use.
+    Setting {
+        /// Model file.
+        path: PathBuf,
+        /// The setting and what it must be.
+        error: milliego_preprocess::SettingError,
+    },
     /// tract could not optimise or run the graph.
     Run {
         /// Model file.
@@ -89,10 +96,11 @@ pub enum ModelError {
 
 impl std::fmt::Display for ModelError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let (what, path, why) = match self {
+        let (what, path, why): (&str, &PathBuf, &dyn std::fmt::Display) = match self {
             ModelError::Load { path, why } => ("cannot load", path, why),
             ModelError::Metadata { path, why } => ("bad metadata in", path, why),
             ModelError::Interface { path, why } => ("interface mismatch in", path, why),
+            ModelError::Setting { path, error } => ("unusable metadata in", path, error),
             ModelError::Run { path, why } => ("inference failed with", path, why),
         };
         write!(f, "model: {what} {}: {why}", path.display())
@@ -151,8 +159,12 @@ fn meta_of(path: &Path, proto: &tract_onnx::pb::ModelProto) -> Result<ModelMeta,
         })?;
     let meta: ModelMeta =
         serde_json::from_str(&entry.value).map_err(|e| bad(format!("milliego entry: {e}")))?;
-    meta.preprocess.validate().map_err(bad)?;
-    meta.norm.validate().map_err(bad)?;
+    let setting = |error| ModelError::Setting {
+        path: path.into(),
+        error,
+    };
+    meta.preprocess.validate().map_err(setting)?;
+    meta.norm.validate().map_err(setting)?;
     if meta.hidden == 0 || meta.hidden > 65_536 {
         return Err(bad(format!("hidden size {} out of range", meta.hidden)));
     }

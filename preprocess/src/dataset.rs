@@ -7,7 +7,7 @@
 
 use crate::pose::{interpolate, relative, to_label};
 use crate::window::{BuilderConfig, Counters, Window, WindowBuilder};
-use crate::{Config, Norm, IMU_LEN, PANO_H, PANO_W};
+use crate::{Config, Norm, SettingError, IMU_LEN, PANO_H, PANO_W};
 use milliego_session::streams::{imu_samples, radar_frames, SessionClock, StreamReport};
 use milliego_session::{Session, SessionError};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
@@ -41,8 +41,12 @@ pub enum DatasetError {
         /// Cause.
         error: String,
     },
-    /// Bad settings.
-    Config(String),
+    /// A preprocessing setting this build cannot use.
+    Config(SettingError),
+    /// No session was given.
+    NoSessions,
+    /// Every panorama pixel of the dataset has the same value, so it cannot be normalised.
+    Flat,
 }
 
 impl std::fmt::Display for DatasetError {
@@ -52,6 +56,10 @@ impl std::fmt::Display for DatasetError {
             DatasetError::Unusable { session, why } => write!(f, "{}: {why}", session.display()),
             DatasetError::Io { path, error } => write!(f, "{}: {error}", path.display()),
             DatasetError::Config(e) => write!(f, "{e}"),
+            DatasetError::NoSessions => f.write_str("no sessions given"),
+            DatasetError::Flat => f.write_str(
+                "every panorama pixel has the same value (no radar returns?): cannot normalise",
+            ),
         }
     }
 }
@@ -484,7 +492,7 @@ pub fn build(
 ) -> Result<Manifest, DatasetError> {
     pre.validate().map_err(DatasetError::Config)?;
     if sessions.is_empty() {
-        return Err(DatasetError::Config("no sessions given".into()));
+        return Err(DatasetError::NoSessions);
     }
     std::fs::create_dir_all(out).map_err(|e| DatasetError::Io {
         path: out.to_path_buf(),
@@ -510,9 +518,7 @@ pub fn build(
         progress(Progress::Done(i, &entry));
         shards.push(entry);
     }
-    let norm = acc.norm().ok_or_else(|| {
-        DatasetError::Config("every panorama pixel has the same value: no radar returns?".into())
-    })?;
+    let norm = acc.norm().ok_or(DatasetError::Flat)?;
     let manifest = Manifest {
         format: FORMAT.into(),
         version: VERSION,

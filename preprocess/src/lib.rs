@@ -87,47 +87,95 @@ impl Default for Config {
     }
 }
 
+/// A preprocessing setting that this build cannot use: which one, its value, and what it
+/// must be.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SettingError {
+    /// The setting, as named in the model metadata or the run configuration
+    /// (e.g. `preprocess.gap`).
+    pub setting: &'static str,
+    /// Its value, as given.
+    pub value: String,
+    /// What it must be.
+    pub requirement: String,
+}
+
+impl SettingError {
+    fn new(setting: &'static str, value: impl std::fmt::Display, requirement: String) -> Self {
+        SettingError {
+            setting,
+            value: value.to_string(),
+            requirement,
+        }
+    }
+}
+
+impl std::fmt::Display for SettingError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} is {}, {}",
+            self.setting, self.value, self.requirement
+        )
+    }
+}
+
+impl std::error::Error for SettingError {}
+
 impl Config {
     /// Checks the fields against what the network and this crate support; the error names the
     /// field and the value.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SettingError> {
         let fixed = [
-            ("pano_h", self.pano_h, PANO_H),
-            ("pano_w", self.pano_w, PANO_W),
-            ("upscale", self.upscale, UPSCALE),
-            ("img_h", self.img_h, IMG_H),
-            ("img_w", self.img_w, IMG_W),
-            ("imu_len", self.imu_len, IMU_LEN),
+            ("preprocess.pano_h", self.pano_h, PANO_H),
+            ("preprocess.pano_w", self.pano_w, PANO_W),
+            ("preprocess.upscale", self.upscale, UPSCALE),
+            ("preprocess.img_h", self.img_h, IMG_H),
+            ("preprocess.img_w", self.img_w, IMG_W),
+            ("preprocess.imu_len", self.imu_len, IMU_LEN),
         ];
         for (name, got, want) in fixed {
             if got != want {
-                return Err(format!(
-                    "preprocess.{name} is {got}, this build supports {want}"
+                return Err(SettingError::new(
+                    name,
+                    got,
+                    format!("this build supports {want}"),
                 ));
             }
         }
         if !(1..=64).contains(&self.gap) {
-            return Err(format!("preprocess.gap is {}, must be 1..=64", self.gap));
+            return Err(SettingError::new(
+                "preprocess.gap",
+                self.gap,
+                "must be 1..=64".into(),
+            ));
         }
         if !(1..=16).contains(&self.overlay) {
-            return Err(format!(
-                "preprocess.overlay is {}, must be 1..=16",
-                self.overlay
+            return Err(SettingError::new(
+                "preprocess.overlay",
+                self.overlay,
+                "must be 1..=16".into(),
             ));
         }
         let span_az = 2.0 * self.az_half_deg / self.deg_per_px + 1.0;
         let span_el = 2.0 * self.el_half_deg / self.deg_per_px + 1.0;
         if (span_az - PANO_W as f64).abs() > 1e-9 || (span_el - PANO_H as f64).abs() > 1e-9 {
-            return Err(format!(
-                "preprocess field of view +-{} x +-{} deg at {} deg/px gives {span_el} x {span_az} \
-                 bins, the network needs {PANO_H} x {PANO_W}",
-                self.el_half_deg, self.az_half_deg, self.deg_per_px
+            return Err(SettingError::new(
+                "preprocess field of view",
+                format_args!(
+                    "+-{} x +-{} deg at {} deg/px",
+                    self.el_half_deg, self.az_half_deg, self.deg_per_px
+                ),
+                format!(
+                    "it gives {span_el} x {span_az} bins, the network needs {PANO_H} x {PANO_W}"
+                ),
             ));
         }
         if !(self.max_range_m.is_finite() && self.max_range_m > 0.0) {
-            return Err(format!(
-                "preprocess.max_range_m is {}, must be > 0",
-                self.max_range_m
+            return Err(SettingError::new(
+                "preprocess.max_range_m",
+                self.max_range_m,
+                "must be > 0".into(),
             ));
         }
         Ok(())
@@ -160,13 +208,14 @@ impl Default for Norm {
 
 impl Norm {
     /// Checks the statistics are finite and max > min.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SettingError> {
         if !(self.min.is_finite() && self.max.is_finite() && self.mean.is_finite())
             || self.max <= self.min
         {
-            return Err(format!(
-                "normalisation min {} max {} mean {}: needs finite values with max > min",
-                self.min, self.max, self.mean
+            return Err(SettingError::new(
+                "normalisation (min, max, mean)",
+                format_args!("({}, {}, {})", self.min, self.max, self.mean),
+                "needs finite values with max > min".into(),
             ));
         }
         Ok(())

@@ -9,7 +9,7 @@
 
 use crate::imu::{resample, ImuSample, ImuWindowError};
 use crate::panorama::{overlay, project, radar_tensor, ProjectStats};
-use crate::{Config, Norm, IMU_LEN, PANO_LEN, RADAR_LEN};
+use crate::{Config, Norm, SettingError, IMU_LEN, PANO_LEN, RADAR_LEN};
 use nalgebra::{UnitQuaternion, Vector3};
 use radar_driver::tlv::Point;
 use std::collections::VecDeque;
@@ -141,16 +141,21 @@ pub struct WindowBuilder {
 
 impl WindowBuilder {
     /// A builder; fails with a message naming the bad setting.
-    pub fn new(cfg: BuilderConfig) -> Result<WindowBuilder, String> {
+    pub fn new(cfg: BuilderConfig) -> Result<WindowBuilder, SettingError> {
         cfg.pre.validate()?;
-        if cfg.max_imu_gap_s.is_nan() || cfg.max_imu_gap_s <= 0.0 || cfg.imu_capacity < 2 * IMU_LEN
-        {
-            return Err(format!(
-                "window builder: max_imu_gap_s {} must be > 0 and imu_capacity {} at least {}",
-                cfg.max_imu_gap_s,
-                cfg.imu_capacity,
-                2 * IMU_LEN
-            ));
+        if cfg.max_imu_gap_s.is_nan() || cfg.max_imu_gap_s <= 0.0 {
+            return Err(SettingError {
+                setting: "window builder max_imu_gap_s",
+                value: cfg.max_imu_gap_s.to_string(),
+                requirement: "must be > 0 s".into(),
+            });
+        }
+        if cfg.imu_capacity < 2 * IMU_LEN {
+            return Err(SettingError {
+                setting: "window builder imu_capacity",
+                value: cfg.imu_capacity.to_string(),
+                requirement: format!("must be at least {} samples", 2 * IMU_LEN),
+            });
         }
         // Frames n - gap .. n, plus room for frames waiting on the IMU.
         let cap = cfg.pre.gap.max(cfg.pre.overlay) as usize + 1 + 8;

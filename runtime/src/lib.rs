@@ -5,6 +5,7 @@
 
 pub mod composer;
 pub mod config;
+pub mod error;
 pub mod estimator;
 /// The learned-model estimator (also at [`estimator::model`], where it lives).
 pub use estimator::model;
@@ -14,4 +15,5 @@ pub mod queue;
 pub mod reader;
 pub mod stage;
 pub mod stats;
+pub mod summary;
 pub mod sync;

@@ -71,24 +71,48 @@ impl std::fmt::Debug for Sink {
     }
 }
 
+/// An output that could not be opened: which one, and the operating system's error.
+#[derive(Debug)]
+pub struct SinkError {
+    /// The output as given (`udp://HOST:PORT`, `serial:DEV[@BAUD]`, `tum:PATH`).
+    pub spec: OutputSpec,
+    /// Why it could not be opened.
+    pub error: io::Error,
+}
+
+impl std::fmt::Display for SinkError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.spec {
+            OutputSpec::Udp(a) => write!(f, "udp://{a}: {}", self.error),
+            OutputSpec::Serial(d, _) => write!(f, "serial:{d}: {}", self.error),
+            OutputSpec::Tum(p) => write!(f, "tum:{}: {}", p.display(), self.error),
+        }
+    }
+}
+
+impl std::error::Error for SinkError {}
+
 impl Sink {
     /// Opens `spec`; `tum_predicted` makes TUM files include predicted poses.
-    pub fn open(spec: &OutputSpec, tum_predicted: bool) -> Result<Sink, String> {
+    pub fn open(spec: &OutputSpec, tum_predicted: bool) -> Result<Sink, SinkError> {
+        let fail = |error: io::Error| SinkError {
+            spec: spec.clone(),
+            error,
+        };
         match spec {
             OutputSpec::Udp(a) => {
-                let s = UdpSocket::bind(("0.0.0.0", 0)).map_err(|e| format!("udp://{a}: {e}"))?;
-                s.connect(a.as_str())
-                    .map_err(|e| format!("udp://{a}: {e}"))?;
+                let s = UdpSocket::bind(("0.0.0.0", 0)).map_err(fail)?;
+                s.connect(a.as_str()).map_err(fail)?;
                 Ok(Sink::Udp(s))
             }
             OutputSpec::Serial(d, b) => serialport::new(d, *b)
                 .timeout(std::time::Duration::from_millis(100))
                 .open()
                 .map(Sink::Serial)
-                .map_err(|e| format!("serial:{d}: {e}")),
+                .map_err(|e| fail(e.into())),
             OutputSpec::Tum(p) => std::fs::File::create(p)
                 .map(|f| Sink::Tum(io::BufWriter::new(f), tum_predicted))
-                .map_err(|e| format!("tum:{}: {e}", p.display())),
+                .map_err(fail),
         }
     }
 

@@ -1,6 +1,7 @@
 //! The threads and their wiring: readers (or the offline feeder) -> synchroniser -> estimator
 //! stage -> output, joined by [`DropOldest`] queues; the summary at the end.
 
+pub use crate::error::{PortRole, RunError};
 use crate::estimator::{build_run_estimators, Built, ClassicalConfig, EstimatorKind};
 use crate::output::{Encoded, OutputSpec, Sink};
 use crate::queue::{DropOldest, Pool};
@@ -10,12 +11,15 @@ use crate::reader::{
 };
 use crate::stage::{PoseOut, Stage, StageConfig, StageCounters};
 use crate::stats::Histogram;
+use crate::summary::{
+    ClockSummary, Clocks, Drops, FramesIn, FramesOut, LatencySummary, Plausibility, Ports,
+    RunSummary, SyncSummary,
+};
 use crate::sync::{SyncConfig, SyncCounters, SyncOut, Synchroniser};
 use imu_driver::TimeWrap;
 use milliego_session::streams::StreamReport;
 use pose_link::Health;
 use radar_driver::host::DecoderConfig;
-use serde_json::json;
 use std::io::Read;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -106,22 +110,6 @@ impl Default for RunConfig {
     }
 }
 
-/// Why a run could not start.
-#[derive(Debug)]
-pub struct RunError(pub String);
-
-impl std::fmt::Display for RunError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for RunError {}
-
-fn err(s: impl Into<String>) -> RunError {
-    RunError(s.into())
-}
-
 /// Latency histograms of a run.
 #[derive(Debug, Clone, Default)]
 pub struct Latencies {
@@ -141,7 +129,7 @@ pub struct Latencies {
 #[derive(Debug, Clone)]
 pub struct Summary {
     /// Everything, as printed and written with `--summary-json`.
-    pub json: serde_json::Value,
+    pub report: RunSummary,
     /// Latencies.
     pub latency: Latencies,
     /// Poses sent (all kinds).
@@ -192,11 +180,20 @@ fn recycle(sh: &Shared, ev: SyncOut) {
     }
 }
 
-fn radar_derived(text: &str) -> Result<radar_driver::cfg::Derived, String> {
-    radar_driver::cfg::RadarConfig::parse(text)
-        .map_err(|e| format!("{e}"))?
-        .derive(None)
-        .map_err(|e| format!("{e}"))
+fn radar_derived(text: &str) -> Result<radar_driver::cfg::Derived, radar_driver::cfg::CfgError> {
+    radar_driver::cfg::RadarConfig::parse(text)?.derive(None)
+}
+
+/// Reads and derives the radar `.cfg` at `path`.
+fn read_radar_cfg(path: &std::path::Path) -> Result<radar_driver::cfg::Derived, RunError> {
+    let text = std::fs::read_to_string(path).map_err(|error| RunError::RadarCfgRead {
+        path: path.to_path_buf(),
+        error,
+    })?;
+    radar_derived(&text).map_err(|error| RunError::RadarCfg {
+        path: path.to_path_buf(),
+        error,
+    })
 }
 
 /// Everything a run needs, derived once from the input and the settings before any thread
@@ -228,16 +225,23 @@ impl Plan {
         };
         match input {
             Input::Session { dir, .. } => {
-                let s = milliego_session::Session::open(dir)
-                    .map_err(|e| err(format!("session {}: {e}", dir.display())))?;
+                let session_err = |error| RunError::Session {
+                    dir: dir.clone(),
+                    error,
+                };
+                let s = milliego_session::Session::open(dir).map_err(session_err)?;
                 cfg.classical.mounting =
                     crate::estimator::Mounting::from_session(&s.meta.extrinsics);
-                if let Some(d) = s
-                    .radar_cfg()
-                    .map_err(|e| err(e.to_string()))?
-                    .and_then(|t| radar_derived(&t).ok())
-                {
-                    apply_cfg(&mut cfg, &d);
+                if let Some(t) = s.radar_cfg().map_err(session_err)? {
+                    // A session's .cfg only refines defaults (Doppler noise, frame period), so
+                    // one that cannot be derived is reported and the defaults stay.
+                    match radar_derived(&t) {
+                        Ok(d) => apply_cfg(&mut cfg, &d),
+                        Err(e) => tracing::warn!(
+                            "session {}: radar .cfg not used ({e}); default radar settings",
+                            dir.display()
+                        ),
+                    }
                 }
                 if let Some(r) = &s.meta.radar {
                     cfg.sync.radar_baud = r.baud;
@@ -251,30 +255,25 @@ impl Plan {
             }
             Input::Devices(d) => {
                 if d.radar_data.is_none() && d.imu.is_none() {
-                    return Err(err("no sensor given: --radar-data and/or --imu"));
+                    return Err(RunError::NoSensor);
                 }
                 cfg.sync.radar_enabled = d.radar_data.is_some();
                 cfg.sync.imu_enabled = d.imu.is_some();
                 cfg.sync.radar_baud = d.radar_baud;
                 cfg.sync.imu_baud = d.imu_baud;
                 if let Some(p) = &d.radar_cfg {
-                    let text = std::fs::read_to_string(p)
-                        .map_err(|e| err(format!("radar .cfg {}: {e}", p.display())))?;
-                    let dv = radar_derived(&text)
-                        .map_err(|e| err(format!("radar .cfg {}: {e}", p.display())))?;
-                    apply_cfg(&mut cfg, &dv);
+                    apply_cfg(&mut cfg, &read_radar_cfg(p)?);
                 }
             }
         }
-        let built = build_run_estimators(cfg.estimator, &cfg.classical, cfg.model.as_deref())
-            .map_err(|e| err(e.to_string()))?;
+        let built = build_run_estimators(cfg.estimator, &cfg.classical, cfg.model.as_deref())?;
         if built.model_fallback {
             tracing::warn!("learned model unavailable: auto runs Doppler (MODEL_FALLBACK)");
         }
         let sinks = cfg
             .outputs
             .iter()
-            .map(|o| Sink::open(o, cfg.tum_predicted).map_err(err))
+            .map(|o| Sink::open(o, cfg.tum_predicted).map_err(RunError::from))
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Plan {
             cfg,
@@ -284,6 +283,17 @@ impl Plan {
             sinks,
         })
     }
+}
+
+/// Starts a named pipeline thread.
+fn spawn_named<T: Send + 'static>(
+    thread: &'static str,
+    f: impl FnOnce() -> T + Send + 'static,
+) -> Result<std::thread::JoinHandle<T>, RunError> {
+    std::thread::Builder::new()
+        .name(thread.into())
+        .spawn(f)
+        .map_err(|error| RunError::Spawn { thread, error })
 }
 
 /// Counters the input threads keep for the summary.
@@ -365,13 +375,13 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
     sh.inputs_done.store(true, Ordering::Release);
     let (h_sync, sync_counters, clocks) = sync_thread
         .join()
-        .map_err(|_| err("sync thread panicked"))?;
+        .map_err(|_| RunError::Panicked { thread: "sync" })?;
     let (h_est, stage_counters) = stage_thread
         .join()
-        .map_err(|_| err("estimator thread panicked"))?;
+        .map_err(|_| RunError::Panicked { thread: "estimate" })?;
     let out = out_thread
         .join()
-        .map_err(|_| err("output thread panicked"))?;
+        .map_err(|_| RunError::Panicked { thread: "output" })?;
     let wall_s = started.elapsed().as_secs_f64();
     let latency = Latencies {
         sync: h_sync,
@@ -390,9 +400,9 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         out: &out,
         radar_report: session_radar_report.as_ref(),
     };
-    let json = summary_json(&ends, &sh, &counters, &latency);
+    let report = run_summary(&ends, &sh, &counters, &latency);
     Ok(Summary {
-        json,
+        report,
         latency,
         poses_sent: u64::from(out.sent),
         radar_poses: out.radar_poses,
@@ -410,22 +420,22 @@ fn start_session(
     online_clock: bool,
     counters: &InputCounters,
 ) -> Result<(std::thread::JoinHandle<()>, StreamReport), RunError> {
-    let (frames, radar_rep) =
-        milliego_session::streams::radar_frames(s).map_err(|e| err(e.to_string()))?;
-    let (imu, _) = milliego_session::streams::imu_samples(s).map_err(|e| err(e.to_string()))?;
+    let session_err = |error| RunError::Session {
+        dir: s.dir.clone(),
+        error,
+    };
+    let (frames, radar_rep) = milliego_session::streams::radar_frames(s).map_err(session_err)?;
+    let (imu, _) = milliego_session::streams::imu_samples(s).map_err(session_err)?;
     if imu.is_empty() && frames.is_empty() {
-        return Err(err("the session has neither radar frames nor IMU samples"));
+        return Err(RunError::EmptySession { dir: s.dir.clone() });
     }
-    let clock = milliego_session::streams::SessionClock::fit(s, &frames, &imu)
-        .map_err(|e| err(e.to_string()))?;
+    let clock =
+        milliego_session::streams::SessionClock::fit(s, &frames, &imu).map_err(session_err)?;
     let sh2 = Arc::clone(sh);
     let dec = Arc::clone(&counters.decoded);
-    let t = std::thread::Builder::new()
-        .name("feeder".into())
-        .spawn(move || {
-            feed_session(&sh2, &frames, &imu, &clock, realtime, online_clock, &dec);
-        })
-        .map_err(|e| err(e.to_string()))?;
+    let t = spawn_named("feeder", move || {
+        feed_session(&sh2, &frames, &imu, &clock, realtime, online_clock, &dec);
+    })?;
     Ok((t, radar_rep))
 }
 
@@ -439,22 +449,35 @@ fn open_devices(d: &Devices) -> Result<(Option<OpenPort>, Option<OpenPort>), Run
     if let Some(p) = &d.radar_data {
         if d.configure {
             if let (Some(cli), Some(cfgp)) = (&d.radar_cli, &d.radar_cfg) {
-                let text = std::fs::read_to_string(cfgp)
-                    .map_err(|e| err(format!("radar .cfg {}: {e}", cfgp.display())))?;
-                let port = radar_driver::host::cli_port::open_serial(cli, 115_200)
-                    .map_err(|e| err(format!("radar CLI port {cli}: {e}")))?;
+                let text =
+                    std::fs::read_to_string(cfgp).map_err(|error| RunError::RadarCfgRead {
+                        path: cfgp.clone(),
+                        error,
+                    })?;
+                let port =
+                    radar_driver::host::cli_port::open_serial(cli, 115_200).map_err(|e| {
+                        RunError::Port {
+                            role: PortRole::RadarCli,
+                            path: cli.clone(),
+                            error: e.into(),
+                        }
+                    })?;
                 let mut c = radar_driver::host::CliPort::new(port, Duration::from_secs(2));
-                c.upload(&text)
-                    .map_err(|e| err(format!("radar configuration over {cli}: {e}")))?;
+                c.upload(&text).map_err(|error| RunError::RadarUpload {
+                    port: cli.clone(),
+                    error,
+                })?;
             }
         }
         let mut src = SerialSource {
             path: p.clone(),
             baud: d.radar_baud,
         };
-        let port = src
-            .open()
-            .map_err(|e| err(format!("radar data port {p}: {e}")))?;
+        let port = src.open().map_err(|error| RunError::Port {
+            role: PortRole::RadarData,
+            path: p.clone(),
+            error,
+        })?;
         radar_port = Some((port, src));
     }
     let mut imu_port = None;
@@ -464,13 +487,19 @@ fn open_devices(d: &Devices) -> Result<(Option<OpenPort>, Option<OpenPort>), Run
             baud: d.imu_baud,
         };
         let port: Box<dyn Read + Send> = if d.configure {
-            let mut dev = imu_driver::host::Device::open(p, d.imu_baud)
-                .map_err(|e| err(format!("IMU port {p}: {e}")))?;
-            dev.go_to_measurement()
-                .map_err(|e| err(format!("IMU {p}: going to measurement: {e}")))?;
+            let imu_err = |error| RunError::Imu {
+                port: p.clone(),
+                error,
+            };
+            let mut dev = imu_driver::host::Device::open(p, d.imu_baud).map_err(imu_err)?;
+            dev.go_to_measurement().map_err(imu_err)?;
             Box::new(dev.into_reader().into_inner())
         } else {
-            src.open().map_err(|e| err(format!("IMU port {p}: {e}")))?
+            src.open().map_err(|error| RunError::Port {
+                role: PortRole::Imu,
+                path: p.clone(),
+                error,
+            })?
         };
         imu_port = Some((port, src));
     }
@@ -500,22 +529,19 @@ fn spawn_radar_reader(
     let ctx = reader_ctx(sh, &counters.radar, backoff);
     let dec = Arc::clone(&counters.decoded);
     let stats = Arc::clone(&counters.radar);
-    std::thread::Builder::new()
-        .name("radar".into())
-        .spawn(move || {
-            let mut decoder = RadarDecoder::new(decoding);
-            let mut sink = radar_sink(&sh2.radar_q, &sh2.pool);
-            read_loop(&mut src, Some(port), &ctx, |b, host_s, ns, reopened| {
-                if reopened {
-                    decoder.resync(&mut sink);
-                }
-                sh2.last_data_ns.store(ns, Ordering::Relaxed);
-                decoder.feed(b, host_s, ns, &mut sink);
-                decoder.publish(&stats);
-                dec[0].store(decoder.frames(), Ordering::Relaxed);
-            });
-        })
-        .map_err(|e| err(e.to_string()))
+    spawn_named("radar", move || {
+        let mut decoder = RadarDecoder::new(decoding);
+        let mut sink = radar_sink(&sh2.radar_q, &sh2.pool);
+        read_loop(&mut src, Some(port), &ctx, |b, host_s, ns, reopened| {
+            if reopened {
+                decoder.resync(&mut sink);
+            }
+            sh2.last_data_ns.store(ns, Ordering::Relaxed);
+            decoder.feed(b, host_s, ns, &mut sink);
+            decoder.publish(&stats);
+            dec[0].store(decoder.frames(), Ordering::Relaxed);
+        });
+    })
 }
 
 /// The IMU reader thread: port -> [`ImuDecoder`] -> IMU queue (drop-oldest).
@@ -530,26 +556,23 @@ fn spawn_imu_reader(
     let sh2 = Arc::clone(sh);
     let ctx = reader_ctx(sh, &counters.imu, backoff);
     let dec = Arc::clone(&counters.decoded);
-    std::thread::Builder::new()
-        .name("imu".into())
-        .spawn(move || {
-            let mut decoder = ImuDecoder::new(wrap);
-            read_loop(&mut src, Some(port), &ctx, |b, host_s, ns, reopened| {
-                if reopened {
-                    decoder.resync();
-                }
-                sh2.last_data_ns.store(ns, Ordering::Relaxed);
-                decoder.feed(b, host_s, ns, |it| {
-                    sh2.imu_q.push(it);
-                });
-                dec[1].store(decoder.samples(), Ordering::Relaxed);
+    spawn_named("imu", move || {
+        let mut decoder = ImuDecoder::new(wrap);
+        read_loop(&mut src, Some(port), &ctx, |b, host_s, ns, reopened| {
+            if reopened {
+                decoder.resync();
+            }
+            sh2.last_data_ns.store(ns, Ordering::Relaxed);
+            decoder.feed(b, host_s, ns, |it| {
+                sh2.imu_q.push(it);
             });
-        })
-        .map_err(|e| err(e.to_string()))
+            dec[1].store(decoder.samples(), Ordering::Relaxed);
+        });
+    })
 }
 
 /// What the synchroniser thread hands back: its latency, counters and clock maps (JSON).
-type SyncEnd = (Histogram, SyncCounters, serde_json::Value);
+type SyncEnd = (Histogram, SyncCounters, Clocks);
 
 /// The synchroniser thread: both queues -> time-ordered events. Live, events are released on the
 /// host clock and a full event queue drops its oldest; offline, on the feeder's watermark, and
@@ -560,81 +583,80 @@ fn spawn_sync(
     session_online_clock: bool,
 ) -> Result<std::thread::JoinHandle<SyncEnd>, RunError> {
     let sh2 = Arc::clone(sh);
-    std::thread::Builder::new()
-        .name("sync".into())
-        .spawn(move || {
-            let offline = sh2.offline;
-            let mut sync = Synchroniser::new(sync_cfg);
-            sync.offline_clock = offline && !session_online_clock;
-            sync.data_time = offline;
-            let mut hist = Histogram::default();
-            loop {
-                let done = sh2.inputs_done.load(Ordering::Acquire);
-                let watermark = f64::from_bits(sh2.watermark.load(Ordering::Acquire));
-                let mut any = false;
-                // IMU first: a radar frame pushed before these samples is then visible below.
-                // Bounded batches: a fast producer must not keep one drain going while the other
-                // queue fills.
-                for _ in 0..sh2.imu_q.len() {
-                    let Some(s) = sh2.imu_q.pop() else { break };
-                    sync.push_imu(s);
-                    any = true;
-                }
-                for _ in 0..sh2.radar_q.len() {
-                    let Some(r) = sh2.radar_q.pop() else { break };
-                    sync.push_radar(r, |b| sh2.pool.give(b));
-                    any = true;
-                }
-                let now = if offline {
-                    watermark
-                } else {
-                    sh2.epoch.elapsed().as_secs_f64()
+    spawn_named("sync", move || {
+        let offline = sh2.offline;
+        let mut sync = Synchroniser::new(sync_cfg);
+        sync.offline_clock = offline && !session_online_clock;
+        sync.data_time = offline;
+        let mut hist = Histogram::default();
+        loop {
+            let done = sh2.inputs_done.load(Ordering::Acquire);
+            let watermark = f64::from_bits(sh2.watermark.load(Ordering::Acquire));
+            let mut any = false;
+            // IMU first: a radar frame pushed before these samples is then visible below.
+            // Bounded batches: a fast producer must not keep one drain going while the other
+            // queue fills.
+            for _ in 0..sh2.imu_q.len() {
+                let Some(s) = sh2.imu_q.pop() else { break };
+                sync.push_imu(s);
+                any = true;
+            }
+            for _ in 0..sh2.radar_q.len() {
+                let Some(r) = sh2.radar_q.pop() else { break };
+                sync.push_radar(r, |b| sh2.pool.give(b));
+                any = true;
+            }
+            let now = if offline {
+                watermark
+            } else {
+                sh2.epoch.elapsed().as_secs_f64()
+            };
+            let emit = |ev: SyncOut| {
+                let read_ns = match &ev {
+                    SyncOut::Imu { read_ns, .. } => Some(*read_ns),
+                    SyncOut::Radar { item, .. } => Some(item.read_ns),
+                    SyncOut::Preview { .. } | SyncOut::Tick { .. } => None,
                 };
-                let emit = |ev: SyncOut| {
-                    let read_ns = match &ev {
-                        SyncOut::Imu { read_ns, .. } => Some(*read_ns),
-                        SyncOut::Radar { item, .. } => Some(item.read_ns),
-                        SyncOut::Preview { .. } | SyncOut::Tick { .. } => None,
-                    };
-                    if let Some(r) = read_ns {
-                        hist.record(sh2.now_ns().saturating_sub(r));
-                    }
-                    if offline {
-                        sh2.ev_q.push_wait(ev);
-                    } else if let Some(old) = sh2.ev_q.push(ev) {
-                        recycle(&sh2, old);
-                    }
-                };
-                if now.is_finite() {
-                    sync.poll(now, emit);
+                if let Some(r) = read_ns {
+                    hist.record(sh2.now_ns().saturating_sub(r));
                 }
-                if done && sh2.imu_q.is_empty() && sh2.radar_q.is_empty() {
-                    sync.flush(|ev| sh2.ev_q.push_wait(ev));
-                    break;
+                if offline {
+                    sh2.ev_q.push_wait(ev);
+                } else if let Some(old) = sh2.ev_q.push(ev) {
+                    recycle(&sh2, old);
                 }
-                sh2.sync_dropped
-                    .store(sync.counters.dropped, Ordering::Relaxed);
-                if !any {
-                    std::thread::sleep(Duration::from_micros(200));
-                }
+            };
+            if now.is_finite() {
+                sync.poll(now, emit);
+            }
+            if done && sh2.imu_q.is_empty() && sh2.radar_q.is_empty() {
+                sync.flush(|ev| sh2.ev_q.push_wait(ev));
+                break;
             }
             sh2.sync_dropped
                 .store(sync.counters.dropped, Ordering::Relaxed);
-            sh2.sync_done.store(true, Ordering::Release);
-            let clock = |c: &crate::sync::OnlineClock| {
-                c.map().map(|(o, r)| {
-                    json!({"offset_s": o, "rate": r, "accepted": c.accepted,
-                           "rejected_late": c.rejected_late})
-                })
-            };
-            let clocks = json!({
-                "radar": clock(&sync.radar_clock),
-                "imu": clock(&sync.imu_clock),
-                "offline_fit": offline,
-            });
-            (hist, sync.counters, clocks)
-        })
-        .map_err(|e| err(e.to_string()))
+            if !any {
+                std::thread::sleep(Duration::from_micros(200));
+            }
+        }
+        sh2.sync_dropped
+            .store(sync.counters.dropped, Ordering::Relaxed);
+        sh2.sync_done.store(true, Ordering::Release);
+        let clock = |c: &crate::sync::OnlineClock| {
+            c.map().map(|(offset_s, rate)| ClockSummary {
+                offset_s,
+                rate,
+                accepted: c.accepted,
+                rejected_late: c.rejected_late,
+            })
+        };
+        let clocks = Clocks {
+            radar: clock(&sync.radar_clock),
+            imu: clock(&sync.imu_clock),
+            offline_fit: offline,
+        };
+        (hist, sync.counters, clocks)
+    })
 }
 
 /// The estimator thread: events -> poses (live, a full pose queue drops its oldest).
@@ -644,39 +666,36 @@ fn spawn_stage(
     built: Built,
 ) -> Result<std::thread::JoinHandle<(Histogram, StageCounters)>, RunError> {
     let sh2 = Arc::clone(sh);
-    std::thread::Builder::new()
-        .name("estimate".into())
-        .spawn(move || {
-            let mut stage = Stage::new(stage_cfg, built);
-            let mut hist = Histogram::default();
-            loop {
-                let done = sh2.sync_done.load(Ordering::Acquire);
-                let Some(ev) = sh2.ev_q.pop() else {
-                    if done && sh2.ev_q.is_empty() {
-                        break;
+    spawn_named("estimate", move || {
+        let mut stage = Stage::new(stage_cfg, built);
+        let mut hist = Histogram::default();
+        loop {
+            let done = sh2.sync_done.load(Ordering::Acquire);
+            let Some(ev) = sh2.ev_q.pop() else {
+                if done && sh2.ev_q.is_empty() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_micros(200));
+                continue;
+            };
+            let t0 = sh2.now_ns();
+            stage.process(
+                ev,
+                t0,
+                |p| {
+                    if sh2.offline {
+                        sh2.pose_q.push_wait(p);
+                    } else {
+                        sh2.pose_q.push(p);
                     }
-                    std::thread::sleep(Duration::from_micros(200));
-                    continue;
-                };
-                let t0 = sh2.now_ns();
-                stage.process(
-                    ev,
-                    t0,
-                    |p| {
-                        if sh2.offline {
-                            sh2.pose_q.push_wait(p);
-                        } else {
-                            sh2.pose_q.push(p);
-                        }
-                    },
-                    |b| sh2.pool.give(b),
-                );
-                hist.record(sh2.now_ns().saturating_sub(t0));
-            }
-            sh2.stage_done.store(true, Ordering::Release);
-            (hist, stage.counters)
-        })
-        .map_err(|e| err(e.to_string()))
+                },
+                |b| sh2.pool.give(b),
+            );
+            hist.record(sh2.now_ns().saturating_sub(t0));
+        }
+        sh2.stage_done.store(true, Ordering::Release);
+        (hist, stage.counters)
+    })
 }
 
 /// What the output thread hands back.
@@ -700,54 +719,51 @@ fn spawn_output(
     mut sinks: Vec<Sink>,
 ) -> Result<std::thread::JoinHandle<OutputEnd>, RunError> {
     let sh2 = Arc::clone(sh);
-    std::thread::Builder::new()
-        .name("output".into())
-        .spawn(move || {
-            let mut enc = Encoded::default();
-            let mut end = OutputEnd::default();
-            let mut last_dropped = 0u64;
-            loop {
-                let done = sh2.stage_done.load(Ordering::Acquire);
-                let Some(mut p) = sh2.pose_q.pop() else {
-                    if done && sh2.pose_q.is_empty() {
-                        break;
-                    }
-                    std::thread::sleep(Duration::from_micros(100));
-                    continue;
-                };
-                let dropped = sh2.dropped();
-                if dropped > last_dropped {
-                    p.msg.health |= Health::FRAMES_DROPPED;
+    spawn_named("output", move || {
+        let mut enc = Encoded::default();
+        let mut end = OutputEnd::default();
+        let mut last_dropped = 0u64;
+        loop {
+            let done = sh2.stage_done.load(Ordering::Acquire);
+            let Some(mut p) = sh2.pose_q.pop() else {
+                if done && sh2.pose_q.is_empty() {
+                    break;
                 }
-                last_dropped = dropped;
-                p.msg.seq = end.sent;
-                end.sent = end.sent.wrapping_add(1);
-                p.msg.dropped_total = dropped.min(u64::from(u32::MAX)) as u32;
-                p.msg.host_time_ns = sh2.now_ns();
-                enc.encode(&p.msg);
-                for s in sinks.iter_mut() {
-                    if let Err(e) = s.send(&p.msg, p.t, &enc.bytes, &enc.serial[..enc.serial_len]) {
-                        end.send_errors += 1;
-                        if end.send_errors < 10 {
-                            tracing::warn!(error = %e, "output failed");
-                        }
-                    }
-                }
-                let sent = sh2.now_ns();
-                end.output.record(sent.saturating_sub(p.emitted_ns));
-                if p.msg.health.contains(Health::PREDICTED) {
-                    end.imu_to_pose.record(sent.saturating_sub(p.read_ns));
-                } else {
-                    end.radar_poses += 1;
-                    end.end_to_end.record(sent.saturating_sub(p.read_ns));
-                }
+                std::thread::sleep(Duration::from_micros(100));
+                continue;
+            };
+            let dropped = sh2.dropped();
+            if dropped > last_dropped {
+                p.msg.health |= Health::FRAMES_DROPPED;
             }
+            last_dropped = dropped;
+            p.msg.seq = end.sent;
+            end.sent = end.sent.wrapping_add(1);
+            p.msg.dropped_total = dropped.min(u64::from(u32::MAX)) as u32;
+            p.msg.host_time_ns = sh2.now_ns();
+            enc.encode(&p.msg);
             for s in sinks.iter_mut() {
-                let _ = s.flush();
+                if let Err(e) = s.send(&p.msg, p.t, &enc.bytes, &enc.serial[..enc.serial_len]) {
+                    end.send_errors += 1;
+                    if end.send_errors < 10 {
+                        tracing::warn!(error = %e, "output failed");
+                    }
+                }
             }
-            end
-        })
-        .map_err(|e| err(e.to_string()))
+            let sent = sh2.now_ns();
+            end.output.record(sent.saturating_sub(p.emitted_ns));
+            if p.msg.health.contains(Health::PREDICTED) {
+                end.imu_to_pose.record(sent.saturating_sub(p.read_ns));
+            } else {
+                end.radar_poses += 1;
+                end.end_to_end.record(sent.saturating_sub(p.read_ns));
+            }
+        }
+        for s in sinks.iter_mut() {
+            let _ = s.flush();
+        }
+        end
+    })
 }
 
 /// Waits for the inputs to end, stopping them on `stop`, the duration limit or idle exit.
@@ -780,67 +796,86 @@ struct RunEnds<'a> {
     offline: bool,
     wall_s: f64,
     sync: SyncCounters,
-    clocks: serde_json::Value,
+    clocks: Clocks,
     stage: StageCounters,
     out: &'a OutputEnd,
     radar_report: Option<&'a StreamReport>,
 }
 
 /// The radar plausibility verdicts: the session decoder's report, or the live reader's counters.
-fn plausibility_json(report: Option<&StreamReport>, live: &ReaderStats) -> serde_json::Value {
+fn plausibility(report: Option<&StreamReport>, live: &ReaderStats) -> Plausibility {
     let load = |c: &AtomicU64| c.load(Ordering::Relaxed);
-    let (rejected, reanchored, retracted, held) = match report {
-        Some(r) => (r.implausible, r.reanchored, r.retracted, r.held),
-        None => (
-            live.implausible.each_ref().map(load),
+    match report {
+        Some(r) => Plausibility::new(&r.implausible, r.reanchored, r.retracted, r.held),
+        None => Plausibility::new(
+            &live.implausible.each_ref().map(load),
             load(&live.reanchored),
             load(&live.retracted),
             load(&live.held),
         ),
-    };
-    let by: serde_json::Map<String, serde_json::Value> = radar_driver::plausible::IMPLAUSIBLE_NAMES
-        .iter()
-        .zip(rejected)
-        .map(|(n, c)| ((*n).to_string(), json!(c)))
-        .collect();
-    json!({
-        "rejected": by,
-        "rejected_total": rejected.iter().sum::<u64>(),
-        "reanchored": reanchored,
-        "retracted": retracted,
-        "held": held,
-    })
+    }
 }
 
 /// The run summary, as printed and written with `--summary-json`.
-fn summary_json(
-    e: &RunEnds<'_>,
-    sh: &Shared,
-    c: &InputCounters,
-    latency: &Latencies,
-) -> serde_json::Value {
+fn run_summary(e: &RunEnds<'_>, sh: &Shared, c: &InputCounters, latency: &Latencies) -> RunSummary {
     let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
     let radar_in = load(&c.decoded[0]);
     let (sc, st) = (&e.sync, &e.stage);
-    json!({
-        "estimator": e.estimator.name(),
-        "input": if e.offline { "session" } else { "devices" },
-        "wall_s": e.wall_s,
-        "frames_in": {"radar": radar_in, "imu": load(&c.decoded[1])},
-        "frames_out": {"poses_sent": e.out.sent, "radar_rate": e.out.radar_poses, "predicted": st.predicted_poses,
-                        "no_pose": st.no_pose, "resets": st.resets, "handovers": st.handovers, "estimator_errors": st.errors,
-                        "send_errors": e.out.send_errors},
-        "drops": {"radar_queue": sh.radar_q.dropped(), "imu_queue": sh.imu_q.dropped(), "sync_buffers": sc.dropped,
-                  "event_queue": sh.ev_q.dropped(), "pose_queue": sh.pose_q.dropped(), "total": sh.dropped()},
-        "sync": {"radar_released": sc.radar, "imu_released": sc.imu, "radar_late": sc.radar_late,
-                 "radar_gaps": sc.radar_gaps, "warmup_held": sc.warmup, "imu_gaps": sc.imu_gaps, "clocks": e.clocks},
-        "ports": {"radar_reopens": load(&c.radar.reopens), "imu_reopens": load(&c.imu.reopens),
-                  "radar_bytes": load(&c.radar.bytes), "imu_bytes": load(&c.imu.bytes)},
-        "latency": {"sync": latency.sync.to_json(), "estimate": latency.estimate.to_json(), "output": latency.output.to_json(),
-                    "end_to_end": latency.end_to_end.to_json(), "imu_to_pose": latency.imu_to_pose.to_json()},
-        "radar_plausibility": plausibility_json(e.radar_report, &c.radar),
-        "per_radar_frame_us": if radar_in > 0 { e.wall_s * 1e6 / radar_in as f64 } else { 0.0 },
-    })
+    RunSummary {
+        estimator: e.estimator.name().into(),
+        input: if e.offline { "session" } else { "devices" }.into(),
+        wall_s: e.wall_s,
+        frames_in: FramesIn {
+            radar: radar_in,
+            imu: load(&c.decoded[1]),
+        },
+        frames_out: FramesOut {
+            poses_sent: u64::from(e.out.sent),
+            radar_rate: e.out.radar_poses,
+            predicted: st.predicted_poses,
+            no_pose: st.no_pose,
+            resets: st.resets,
+            handovers: st.handovers,
+            estimator_errors: st.errors,
+            send_errors: e.out.send_errors,
+        },
+        drops: Drops {
+            radar_queue: sh.radar_q.dropped(),
+            imu_queue: sh.imu_q.dropped(),
+            sync_buffers: sc.dropped,
+            event_queue: sh.ev_q.dropped(),
+            pose_queue: sh.pose_q.dropped(),
+            total: sh.dropped(),
+        },
+        sync: SyncSummary {
+            radar_released: sc.radar,
+            imu_released: sc.imu,
+            radar_late: sc.radar_late,
+            radar_gaps: sc.radar_gaps,
+            warmup_held: sc.warmup,
+            imu_gaps: sc.imu_gaps,
+            clocks: e.clocks,
+        },
+        ports: Ports {
+            radar_reopens: load(&c.radar.reopens),
+            imu_reopens: load(&c.imu.reopens),
+            radar_bytes: load(&c.radar.bytes),
+            imu_bytes: load(&c.imu.bytes),
+        },
+        latency: LatencySummary {
+            sync: latency.sync.summary(),
+            estimate: latency.estimate.summary(),
+            output: latency.output.summary(),
+            end_to_end: latency.end_to_end.summary(),
+            imu_to_pose: latency.imu_to_pose.summary(),
+        },
+        radar_plausibility: plausibility(e.radar_report, &c.radar),
+        per_radar_frame_us: if radar_in > 0 {
+            e.wall_s * 1e6 / radar_in as f64
+        } else {
+            0.0
+        },
+    }
 }
 
 /// Feeds a session's decoded streams in the offline runner's order (each radar frame before the

@@ -116,16 +116,16 @@ impl Histogram {
         self.sum += o.sum;
     }
 
-    /// `{"count", "p50_ms", "p99_ms", "max_ms", "mean_ms"}` for summaries.
-    pub fn to_json(&self) -> serde_json::Value {
+    /// The histogram's count, quantiles and mean \[ms\], as the run summary reports them.
+    pub fn summary(&self) -> crate::summary::HistogramSummary {
         let ms = |v: Option<u64>| v.map(|v| v as f64 * 1e-6);
-        serde_json::json!({
-            "count": self.n,
-            "p50_ms": ms(self.quantile(0.5)),
-            "p99_ms": ms(self.quantile(0.99)),
-            "max_ms": ms((self.n > 0).then_some(self.max)),
-            "mean_ms": self.mean() * 1e-6,
-        })
+        crate::summary::HistogramSummary {
+            count: self.n,
+            p50_ms: ms(self.quantile(0.5)),
+            p99_ms: ms(self.quantile(0.99)),
+            max_ms: ms((self.n > 0).then_some(self.max)),
+            mean_ms: self.mean() * 1e-6,
+        }
     }
 }
 

@@ -4,12 +4,14 @@
 use super::{Classical, ClassicalConfig, Estimator, EstimatorKind, ModelEstimator};
 
 /// Why an estimator could not be built.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug)]
 pub enum BuildError {
     /// No model file was given.
     ModelUnavailable,
-    /// The model file could not be loaded.
-    BadModel(String),
+    /// The model file could not be loaded (the error names the file and why).
+    BadModel(milliego_models::ModelError),
+    /// This build's preprocessing settings cannot feed the model.
+    Preprocessing(milliego_preprocess::SettingError),
 }
 
 impl std::fmt::Display for BuildError {
@@ -21,7 +23,8 @@ impl std::fmt::Display for BuildError {
                     "the learned-model estimator needs a model file (--model PATH)"
                 )
             }
-            BuildError::BadModel(why) => write!(f, "cannot load the model: {why}"),
+            BuildError::BadModel(e) => write!(f, "cannot load the model: {e}"),
+            BuildError::Preprocessing(e) => write!(f, "learned-model estimator: {e}"),
         }
     }
 }
@@ -60,9 +63,7 @@ pub fn build_estimator(
         EstimatorKind::Imu => Ok(Box::new(Classical::imu_only(*cfg))),
         EstimatorKind::Model => {
             let path = model_path.ok_or(BuildError::ModelUnavailable)?;
-            ModelEstimator::load(path, &cfg.mounting)
-                .map(|m| Box::new(m) as Box<dyn Estimator>)
-                .map_err(BuildError::BadModel)
+            ModelEstimator::load(path, &cfg.mounting).map(|m| Box::new(m) as Box<dyn Estimator>)
         }
         EstimatorKind::Auto => match build_estimator(EstimatorKind::Model, cfg, model_path) {
             Ok(m) => Ok(m),
@@ -85,14 +86,14 @@ pub fn build_run_estimators(
                 fallback: Some(build_estimator(EstimatorKind::Doppler, cfg, None)?),
                 model_fallback: false,
             }),
-            Err(BuildError::BadModel(why)) if model_path.is_some() => {
-                Err(BuildError::BadModel(why))
-            }
-            Err(_) => Ok(Built {
+            Err(BuildError::ModelUnavailable) => Ok(Built {
                 primary: build_estimator(EstimatorKind::Doppler, cfg, None)?,
                 fallback: None,
                 model_fallback: true,
             }),
+            // A model that was given but cannot be used stops the run: falling back silently
+            // would hide a broken deployment.
+            Err(e) => Err(e),
         },
         k => Ok(Built {
             primary: build_estimator(k, cfg, model_path)?,

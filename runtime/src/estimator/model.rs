@@ -12,7 +12,7 @@
 //! frame, so the pose of keyframe n is published with radar frame n + 1 (one radar period later);
 //! the IMU-rate prediction fills the gap for AR consumers.
 
-use super::{Estimator, EstimatorError, ImuInput, Mounting, RadarInput, RelativePose};
+use super::{BuildError, Estimator, EstimatorError, ImuInput, Mounting, RadarInput, RelativePose};
 use milliego_models::chain::{ChainError, ChainStep, KeyframeChain};
 use milliego_models::Model;
 use milliego_preprocess::window::{BuilderConfig, WindowBuilder};
@@ -43,14 +43,15 @@ impl std::fmt::Debug for ModelEstimator {
 
 impl ModelEstimator {
     /// Loads `path` (checked against this build's preprocessing) for sensors mounted as `m`.
-    pub fn load(path: &std::path::Path, m: &Mounting) -> Result<ModelEstimator, String> {
+    pub fn load(path: &std::path::Path, m: &Mounting) -> Result<ModelEstimator, BuildError> {
         let pre = milliego_preprocess::Config::default();
-        let model = Model::load(path, Some(&pre)).map_err(|e| e.to_string())?;
+        let model = Model::load(path, Some(&pre)).map_err(BuildError::BadModel)?;
         let builder = WindowBuilder::new(BuilderConfig {
             pre,
             imu_to_body: m.imu.rotation,
             ..BuilderConfig::default()
-        })?;
+        })
+        .map_err(BuildError::Preprocessing)?;
         Ok(ModelEstimator {
             model,
             builder,

@@ -1,0 +1,220 @@
+//! The run summary: what `milliego run` prints at the end and writes with `--summary-json`. Every
+//! count a run keeps is here, so nothing it dropped goes unreported. The JSON keys are the field
+//! names; times are in seconds unless the name says otherwise (`_ms`, `_us`).
+
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// The whole summary of one run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunSummary {
+    /// The estimator asked for (`auto`, `model`, `doppler`, `imu`).
+    pub estimator: String,
+    /// What was read: `session` (a recorded session) or `devices` (live ports).
+    pub input: String,
+    /// Wall time of the run \[s\].
+    pub wall_s: f64,
+    /// Radar frames and IMU samples decoded.
+    pub frames_in: FramesIn,
+    /// What the estimator stage and the outputs produced.
+    pub frames_out: FramesOut,
+    /// Items dropped by every queue and buffer.
+    pub drops: Drops,
+    /// The synchroniser's counters and clocks.
+    pub sync: SyncSummary,
+    /// Serial port counters.
+    pub ports: Ports,
+    /// Latency histograms.
+    pub latency: LatencySummary,
+    /// Radar frames the plausibility checks rejected, re-anchored, retracted or held.
+    pub radar_plausibility: Plausibility,
+    /// Wall time per decoded radar frame \[us\] (0 without radar).
+    pub per_radar_frame_us: f64,
+}
+
+/// Inputs decoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FramesIn {
+    /// Radar frames.
+    pub radar: u64,
+    /// IMU samples.
+    pub imu: u64,
+}
+
+/// Outputs produced.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FramesOut {
+    /// Poses sent, of every kind.
+    pub poses_sent: u64,
+    /// Radar-rate poses sent.
+    pub radar_rate: u64,
+    /// IMU-rate predicted poses the stage produced.
+    pub predicted: u64,
+    /// Radar frames that produced no pose (levelling, model stride).
+    pub no_pose: u64,
+    /// Origin resets.
+    pub resets: u64,
+    /// Hand-overs from the primary estimator to the fallback.
+    pub handovers: u64,
+    /// Estimator errors.
+    pub estimator_errors: u64,
+    /// Sends that failed (counted, the pose is lost for that sink).
+    pub send_errors: u64,
+}
+
+/// Drops of every queue and buffer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Drops {
+    /// Radar reader -> synchroniser queue.
+    pub radar_queue: u64,
+    /// IMU reader -> synchroniser queue.
+    pub imu_queue: u64,
+    /// The synchroniser's reordering buffers.
+    pub sync_buffers: u64,
+    /// Synchroniser -> estimator queue.
+    pub event_queue: u64,
+    /// Estimator -> output queue.
+    pub pose_queue: u64,
+    /// All of the above.
+    pub total: u64,
+}
+
+/// The synchroniser.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SyncSummary {
+    /// Radar frames released.
+    pub radar_released: u64,
+    /// IMU samples released.
+    pub imu_released: u64,
+    /// Radar frames released after the IMU had passed their time.
+    pub radar_late: u64,
+    /// Times the radar was declared missing.
+    pub radar_gaps: u64,
+    /// Items held while the clocks were not yet synchronised (start-up), re-timed after.
+    pub warmup_held: u64,
+    /// Times the IMU was declared missing.
+    pub imu_gaps: u64,
+    /// The sensor -> host clock maps.
+    pub clocks: Clocks,
+}
+
+/// The clock maps at the end of the run.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Clocks {
+    /// Radar clock, once it has a map.
+    pub radar: Option<ClockSummary>,
+    /// IMU clock, once it has a map.
+    pub imu: Option<ClockSummary>,
+    /// True when the session's offline clock fit was used instead of the online clocks.
+    pub offline_fit: bool,
+}
+
+/// One sensor -> host clock map.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ClockSummary {
+    /// Offset \[s\]: host = offset + rate * sensor.
+    pub offset_s: f64,
+    /// Rate (host seconds per sensor second).
+    pub rate: f64,
+    /// (sensor, host) pairs accepted into the fit window.
+    pub accepted: u64,
+    /// Pairs rejected as late.
+    pub rejected_late: u64,
+}
+
+/// Serial port counters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Ports {
+    /// Times the radar data port was reopened.
+    pub radar_reopens: u64,
+    /// Times the IMU port was reopened.
+    pub imu_reopens: u64,
+    /// Radar bytes read \[B\].
+    pub radar_bytes: u64,
+    /// IMU bytes read \[B\].
+    pub imu_bytes: u64,
+}
+
+/// The latency histograms.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LatencySummary {
+    /// Read of the last byte -> released by the synchroniser.
+    pub sync: HistogramSummary,
+    /// Estimator compute time per event.
+    pub estimate: HistogramSummary,
+    /// Estimator stage -> sent.
+    pub output: HistogramSummary,
+    /// Radar-rate poses: sensor byte read -> sent.
+    pub end_to_end: HistogramSummary,
+    /// Predicted poses: IMU sample read -> sent.
+    pub imu_to_pose: HistogramSummary,
+}
+
+/// One latency histogram.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HistogramSummary {
+    /// Values recorded.
+    pub count: u64,
+    /// Median \[ms\] (none when empty).
+    pub p50_ms: Option<f64>,
+    /// 99th percentile \[ms\].
+    pub p99_ms: Option<f64>,
+    /// Largest \[ms\].
+    pub max_ms: Option<f64>,
+    /// Mean \[ms\].
+    pub mean_ms: f64,
+}
+
+/// The radar plausibility verdicts.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Plausibility {
+    /// Frames rejected, by reason (every reason listed, zero included).
+    pub rejected: BTreeMap<String, u64>,
+    /// Frames rejected, all reasons.
+    pub rejected_total: u64,
+    /// Frames that confirmed a sensor restart or frame-number jump (the frame before them was
+    /// rejected as `frame_number`, these were accepted).
+    pub reanchored: u64,
+    /// Frames the framer retracted (they lost bytes on the wire and ended inside the next
+    /// frame's magic word); never published.
+    pub retracted: u64,
+    /// Frames held for the bytes after them before they were published or retracted (their
+    /// last bytes began a magic word).
+    pub held: u64,
+}
+
+impl Plausibility {
+    /// From the per-reason counts, in [`radar_driver::plausible::IMPLAUSIBLE_NAMES`] order.
+    pub fn new(rejected: &[u64], reanchored: u64, retracted: u64, held: u64) -> Plausibility {
+        Plausibility {
+            rejected: radar_driver::plausible::IMPLAUSIBLE_NAMES
+                .iter()
+                .zip(rejected)
+                .map(|(n, c)| ((*n).to_string(), *c))
+                .collect(),
+            rejected_total: rejected.iter().sum(),
+            reanchored,
+            retracted,
+            held,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plausibility_lists_every_reason_and_the_total() {
+        let n = radar_driver::plausible::IMPLAUSIBLE_NAMES.len();
+        let counts: Vec<u64> = (1..=n as u64).collect();
+        let p = Plausibility::new(&counts, 2, 3, 4);
+        assert_eq!(p.rejected.len(), n);
+        assert_eq!(p.rejected_total, counts.iter().sum::<u64>());
+        let name = radar_driver::plausible::IMPLAUSIBLE_NAMES[0];
+        assert_eq!(p.rejected[name], 1);
+        let j = serde_json::to_value(&p).unwrap();
+        assert_eq!(j["held"], 4);
+        assert_eq!(serde_json::from_value::<Plausibility>(j).unwrap(), p);
+    }
+}
