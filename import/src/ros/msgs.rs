@@ -375,7 +375,7 @@ mod tests {
         }
         fn al(&mut self, n: usize) {
             if self.cdr {
-                while (self.b.len() - 4) % n != 0 {
+                while !(self.b.len() - 4).is_multiple_of(n) {
                     self.b.push(0);
                 }
             }
