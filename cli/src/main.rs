@@ -10,6 +10,7 @@ use std::process::ExitCode;
 mod dataset;
 mod demo;
 mod eval;
+mod import;
 mod imu;
 mod mcap;
 mod odometry;
@@ -74,6 +75,8 @@ enum Command {
     Record(record::RecordArgs),
     /// A session and estimated trajectories as MCAP with ROS 2 schemas (Foxglove, ros2 bag).
     ExportMcap(mcap::McapArgs),
+    /// Recordings in: ROS 1 bags, ROS 2 bags (sqlite3 / MCAP), MCAP files -> a session.
+    Import(import::ImportArgs),
 }
 
 fn main() -> ExitCode {
@@ -94,6 +97,7 @@ fn main() -> ExitCode {
         Command::Replay(args) => replay::run(args),
         Command::Record(args) => record::run(args),
         Command::ExportMcap(args) => mcap::run(args),
+        Command::Import(args) => import::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

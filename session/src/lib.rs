@@ -25,8 +25,8 @@ mod tum;
 
 pub use index::{read_index, IndexEntry, IndexWriter, INDEX_MAGIC};
 pub use meta::{
-    ClockTruth, Extrinsic, Extrinsics, GroundTruthMeta, ImuMeta, Meta, RadarMeta, Source, FORMAT,
-    VERSION,
+    ClockTruth, Extrinsic, Extrinsics, GroundTruthMeta, ImportMeta, ImportedStream, ImuMeta, Meta,
+    RadarMeta, Source, FORMAT, VERSION,
 };
 pub use tum::{read_tum, write_tum, TumPose};
 

@@ -6,8 +6,10 @@ use std::path::Path;
 
 /// Value of the `format` key.
 pub const FORMAT: &str = "milliego-session";
-/// Current format version. Readers accept this version and older ones.
-pub const VERSION: u32 = 1;
+/// Current format version. Readers accept this version and older ones. Writers write the
+/// oldest version that holds what the session uses ([`Meta::required_version`]): 2 only for the
+/// `[import]` table, so sessions without it stay readable by version 1 readers.
+pub const VERSION: u32 = 2;
 
 /// Where the data came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -202,6 +204,50 @@ pub struct Meta {
     /// Clock truth (simulated sessions).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub clock: Option<ClockTruth>,
+    /// Where an imported session's data came from and how it was timed (version 2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub import: Option<ImportMeta>,
+}
+
+/// The provenance of an imported session (`[import]`, version 2): the recordings, and per
+/// stream the topic, how its samples were timed and what was dropped. Readers need none of it to
+/// decode the session; it is there so a user can see what the import decided.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct ImportMeta {
+    /// The tool and its version (`milliego import 0.1.0`).
+    pub tool: String,
+    /// The recordings read, as given.
+    pub sources: Vec<String>,
+    /// Recording time of the session's host-clock zero \[ns, the recording's clock\].
+    pub time_origin_ns: i64,
+    /// Per stream (`radar`, `imu`, `pressure`, `groundtruth`, `trigger`).
+    #[serde(default)]
+    pub streams: Vec<ImportedStream>,
+}
+
+/// One imported stream.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct ImportedStream {
+    /// `radar`, `imu`, `pressure`, `groundtruth` or `trigger`.
+    pub stream: String,
+    /// Topic (or CSV file).
+    pub topic: String,
+    /// Message type.
+    pub msg_type: String,
+    /// How the samples were timed, in words (e.g. `trigger /radar/trigger, by sequence number`).
+    pub timing: String,
+    /// Messages read.
+    pub messages: u64,
+    /// Samples written to the session.
+    pub written: u64,
+    /// Messages or points dropped, by reason.
+    #[serde(default)]
+    pub dropped: std::collections::BTreeMap<String, u64>,
+    /// Anything else the import decided (field names used, axis conversion).
+    #[serde(default)]
+    pub notes: Vec<String>,
 }
 
 impl Meta {
@@ -217,6 +263,7 @@ impl Meta {
             extrinsics: Extrinsics::default(),
             groundtruth: None,
             clock: None,
+            import: None,
         }
     }
 
@@ -248,10 +295,21 @@ impl Meta {
         Ok(meta)
     }
 
-    /// Writes `session.toml`.
+    /// The oldest format version that holds this metadata: 2 with an `[import]` table, else 1.
+    pub fn required_version(&self) -> u32 {
+        if self.import.is_some() {
+            2
+        } else {
+            1
+        }
+    }
+
+    /// Writes `session.toml`, as the oldest version that holds it ([`Meta::required_version`]).
     pub fn write(&self, path: &Path) -> Result<(), SessionError> {
+        let mut m = self.clone();
+        m.version = self.required_version();
         let text =
-            toml::to_string_pretty(self).map_err(|e| err(path, ErrorKind::Meta(e.to_string())))?;
+            toml::to_string_pretty(&m).map_err(|e| err(path, ErrorKind::Meta(e.to_string())))?;
         std::fs::write(path, text).map_err(io_err(path))
     }
 }

@@ -347,7 +347,10 @@ mod tests {
         let e = Reader::new(&[1, 2, 0, 0], Encoding::Cdr).unwrap_err();
         assert_eq!(e.kind, MsgErrorKind::BadEncapsulation([1, 2]));
         let e = Reader::new(&[0, 1], Encoding::Cdr).unwrap_err();
-        assert!(matches!(e.kind, MsgErrorKind::Truncated { need: 4, left: 2 }));
+        assert!(matches!(
+            e.kind,
+            MsgErrorKind::Truncated { need: 4, left: 2 }
+        ));
     }
 
     #[test]

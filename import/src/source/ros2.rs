@@ -3,8 +3,6 @@
 use super::{RawMessage, Source, SourceError, TopicInfo};
 use std::path::{Path, PathBuf};
 
-
-
 /// A ROS 2 bag directory opened for reading.
 #[derive(Debug)]
 pub struct Ros2Bag {

@@ -1,0 +1,151 @@
+//! `milliego import` on the recordings users have, written by an independent writer (Python
+//! `rosbags`) from a simulated session with known truth: a ROS 1 bag in ti_mmwave_rospkg style
+//! (zero scan stamps, scans arriving 100-130 ms late, a hardware trigger topic), a ROS 2 bag
+//! (sqlite3), and the MCAP `export-mcap` wrote. On every imported session `milliego odometry`
+//! must reproduce the original session's accuracy (ATE within 5%).
+//!
+//! Needs a Python with `rosbags`, `mcap` and `mcap-ros2-support` (`MILLIEGO_ROS_PYTHON`; a skip
+//! line otherwise, a failure with `MILLIEGO_REQUIRE_ROS=1`).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const BIN: &str = env!("CARGO_BIN_EXE_milliego");
+
+fn milliego(args: &[&str]) -> String {
+    let out = Command::new(BIN).args(args).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "milliego {args:?} failed:\n{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text
+}
+
+fn ros_python() -> Option<String> {
+    let py = std::env::var("MILLIEGO_ROS_PYTHON").unwrap_or_else(|_| "python3".into());
+    let ok = Command::new(&py)
+        .args(["-c", "import rosbags, mcap, mcap_ros2, numpy"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        let msg = format!("skipped: rosbags / mcap / mcap-ros2-support / numpy not importable by {py} (set MILLIEGO_ROS_PYTHON)");
+        assert!(
+            std::env::var("MILLIEGO_REQUIRE_ROS").as_deref() != Ok("1"),
+            "{msg}"
+        );
+        println!("{msg}");
+        return None;
+    }
+    Some(py)
+}
+
+/// ATE RMSE [m] of `milliego odometry` on a session against the session's ground truth.
+fn ate(session: &Path, work: &Path, name: &str) -> f64 {
+    let est = work.join(format!("{name}.tum"));
+    let s = session.to_str().unwrap();
+    milliego(&["odometry", "--session", s, "-o", est.to_str().unwrap()]);
+    let gt = session.join("groundtruth.tum");
+    let j: serde_json::Value = serde_json::from_str(&milliego(&[
+        "eval",
+        "--est",
+        est.to_str().unwrap(),
+        "--gt",
+        gt.to_str().unwrap(),
+        "--json",
+    ]))
+    .unwrap();
+    j["ate_m"]["rmse"].as_f64().unwrap()
+}
+
+#[test]
+fn imported_bags_reproduce_the_original_accuracy() {
+    let Some(py) = ros_python() else { return };
+    let d = tempfile::tempdir().unwrap();
+    let w = d.path();
+    let p = |n: &str| -> PathBuf { w.join(n) };
+    let s = |x: &PathBuf| x.to_str().unwrap().to_string();
+    let orig = p("orig");
+    milliego(&[
+        "sim",
+        "--family",
+        "office",
+        "--motion",
+        "handheld",
+        "--seed",
+        "11",
+        "--duration",
+        "20",
+        "-o",
+        &s(&orig),
+    ]);
+    milliego(&["export-mcap", &s(&orig), "-o", &s(&p("s.mcap"))]);
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../import/tests/py/bags_from_mcap.py");
+    let out = Command::new(&py)
+        .arg(&script)
+        .args([
+            s(&p("s.mcap")),
+            s(&p("bags")),
+            "--compression".into(),
+            "lz4".into(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    let a0 = ate(&orig, w, "orig");
+    let bags = p("bags");
+    let cases: [(&str, Vec<String>); 3] = [
+        (
+            "ti",
+            vec![
+                s(&bags.join("ti.bag")),
+                "--calib".into(),
+                s(&bags.join("rig.toml")),
+            ],
+        ),
+        (
+            "ros2",
+            vec![
+                s(&bags.join("ros2_db3")),
+                "--calib".into(),
+                s(&bags.join("rig.toml")),
+            ],
+        ),
+        (
+            "mcap",
+            vec![
+                s(&p("s.mcap")),
+                "--calib".into(),
+                s(&bags.join("rig_session.toml")),
+                "--radar-axes".into(),
+                "session".into(),
+            ],
+        ),
+    ];
+    for (name, args) in cases {
+        let dir = p(&format!("imported-{name}"));
+        let mut a: Vec<&str> = vec!["import"];
+        a.extend(args.iter().map(String::as_str));
+        a.extend(["-o", dir.to_str().unwrap()]);
+        let report = milliego(&a);
+        println!("{name}:\n{report}");
+        if name == "ti" {
+            assert!(
+                report.contains("trigger /radar/trigger, by sequence number"),
+                "{report}"
+            );
+        }
+        let ai = ate(&dir, w, name);
+        println!("{name}: ATE {ai:.4} m, original {a0:.4} m");
+        assert!(
+            (ai - a0).abs() <= 0.05 * a0,
+            "{name}: ATE {ai} m vs {a0} m on the original session"
+        );
+    }
+}
