@@ -149,3 +149,70 @@ fn imported_bags_reproduce_the_original_accuracy() {
         );
     }
 }
+
+/// Radar frames (relative time [s], points) and IMU samples (relative time [s], accel, gyro) of a
+/// session, on its own clock.
+#[allow(clippy::type_complexity)]
+fn streams(dir: &Path) -> (Vec<(f64, Vec<[f32; 4]>)>, Vec<(f64, [f64; 3], [f64; 3])>) {
+    use milliego_session::streams::{imu_samples, radar_frames, SessionClock};
+    let s = milliego_session::Session::open(dir).unwrap();
+    let (frames, _) = radar_frames(&s).unwrap();
+    let (imu, _) = imu_samples(&s).unwrap();
+    let c = SessionClock::fit(&s, &frames, &imu).unwrap();
+    let radar: Vec<(f64, Vec<[f32; 4]>)> = frames
+        .iter()
+        .map(|f| {
+            (
+                c.radar_s(f).unwrap(),
+                f.cloud
+                    .points
+                    .iter()
+                    .map(|p| [p.x, p.y, p.z, p.velocity])
+                    .collect(),
+            )
+        })
+        .collect();
+    let imu: Vec<(f64, [f64; 3], [f64; 3])> = imu
+        .iter()
+        .map(|i| (c.imu_s(i.sensor_s), i.accel, i.gyro))
+        .collect();
+    let t0 = radar[0].0;
+    (
+        radar.into_iter().map(|(t, p)| (t - t0, p)).collect(),
+        imu.into_iter().map(|(t, a, g)| (t - t0, a, g)).collect(),
+    )
+}
+
+/// import(export(S)) == S for what both hold: every radar point exactly, every IMU value
+/// exactly, radar times to 1 us and IMU times to the 100 us SampleTimeFine grid.
+#[test]
+fn import_of_the_export_is_the_session() {
+    let d = tempfile::tempdir().unwrap();
+    let w = d.path();
+    let orig = w.join("orig");
+    let o = orig.to_str().unwrap();
+    milliego(&["sim", "--family", "corridor", "--motion", "robot", "--seed", "3", "--duration", "8", "-o", o]);
+    let mcap = w.join("s.mcap");
+    milliego(&["export-mcap", o, "-o", mcap.to_str().unwrap()]);
+    let back = w.join("back");
+    milliego(&[
+        "import",
+        mcap.to_str().unwrap(),
+        "--radar-axes",
+        "session",
+        "-o",
+        back.to_str().unwrap(),
+    ]);
+    let (r0, i0) = streams(&orig);
+    let (r1, i1) = streams(&back);
+    assert_eq!(r0.len(), r1.len(), "radar frames");
+    for (k, (a, b)) in r0.iter().zip(&r1).enumerate() {
+        assert!((a.0 - b.0).abs() < 1e-6, "frame {k}: {} s vs {} s", a.0, b.0);
+        assert_eq!(a.1, b.1, "frame {k} points");
+    }
+    assert_eq!(i0.len(), i1.len(), "IMU samples");
+    for (k, (a, b)) in i0.iter().zip(&i1).enumerate() {
+        assert!((a.0 - b.0).abs() <= 1e-4, "sample {k}: {} s vs {} s", a.0, b.0);
+        assert_eq!((a.1, a.2), (b.1, b.2), "sample {k} values");
+    }
+}
