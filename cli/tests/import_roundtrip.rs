@@ -191,15 +191,26 @@ fn import_of_the_export_is_the_session() {
     let w = d.path();
     let orig = w.join("orig");
     let o = orig.to_str().unwrap();
-    milliego(&["sim", "--family", "corridor", "--motion", "robot", "--seed", "3", "--duration", "8", "-o", o]);
+    milliego(&[
+        "sim",
+        "--family",
+        "corridor",
+        "--motion",
+        "robot",
+        "--seed",
+        "3",
+        "--duration",
+        "8",
+        "-o",
+        o,
+    ]);
     let mcap = w.join("s.mcap");
     milliego(&["export-mcap", o, "-o", mcap.to_str().unwrap()]);
     let back = w.join("back");
+    // No --radar-axes: the export's metadata says its points are in TI axes.
     milliego(&[
         "import",
         mcap.to_str().unwrap(),
-        "--radar-axes",
-        "session",
         "-o",
         back.to_str().unwrap(),
     ]);
@@ -207,12 +218,22 @@ fn import_of_the_export_is_the_session() {
     let (r1, i1) = streams(&back);
     assert_eq!(r0.len(), r1.len(), "radar frames");
     for (k, (a, b)) in r0.iter().zip(&r1).enumerate() {
-        assert!((a.0 - b.0).abs() < 1e-6, "frame {k}: {} s vs {} s", a.0, b.0);
+        assert!(
+            (a.0 - b.0).abs() < 1e-6,
+            "frame {k}: {} s vs {} s",
+            a.0,
+            b.0
+        );
         assert_eq!(a.1, b.1, "frame {k} points");
     }
     assert_eq!(i0.len(), i1.len(), "IMU samples");
     for (k, (a, b)) in i0.iter().zip(&i1).enumerate() {
-        assert!((a.0 - b.0).abs() <= 1e-4, "sample {k}: {} s vs {} s", a.0, b.0);
+        assert!(
+            (a.0 - b.0).abs() <= 1e-4,
+            "sample {k}: {} s vs {} s",
+            a.0,
+            b.0
+        );
         assert_eq!((a.1, a.2), (b.1, b.2), "sample {k} values");
     }
 }

@@ -658,7 +658,10 @@ pub fn import(
     };
 
     // Second pass: the sensor streams.
-    let axes = opts.radar_axes.unwrap_or(RadarAxes::Ros);
+    let axes = match opts.radar_axes {
+        Some(a) => a,
+        None => detect_axes(sources)?,
+    };
     let mut layouts: BTreeMap<Vec<(String, u32, u8)>, PointLayout> = BTreeMap::new();
     let mut radar_q = Reorder::new();
     let mut imu_q = Reorder::new();
@@ -868,6 +871,19 @@ pub fn import(
     });
     let session = w.finish().map_err(ImportError::Session)?;
     Ok(ImportReport { session, streams })
+}
+
+/// The radar axes a recording declares: `milliego export-mcap` records `radar_axes = "ti"` in its
+/// `milliego` metadata; anything else is taken to follow ROS (x forward).
+fn detect_axes(sources: &[PathBuf]) -> Result<RadarAxes, ImportError> {
+    for p in sources {
+        for (name, kv) in source::open(p)?.metadata()? {
+            if name == "milliego" && kv.get("radar_axes").map(String::as_str) == Some("ti") {
+                return Ok(RadarAxes::Session);
+            }
+        }
+    }
+    Ok(RadarAxes::Ros)
 }
 
 /// Writes one chunk whose data was measured at `t_s`: the host stamp is when its last byte would

@@ -19,6 +19,9 @@ use std::path::{Path, PathBuf};
 
 /// Topic of the radar point clouds.
 pub const RADAR_TOPIC: &str = "/radar/points";
+/// The `radar_axes` value of the `milliego` metadata record: `/radar/points` are in the
+/// session's (TI's) radar axes, x right, y boresight, z up.
+pub const RADAR_AXES: &str = "ti";
 /// Topic of the IMU samples.
 pub const IMU_TOPIC: &str = "/imu/data";
 /// Topic of the sensor extrinsics.
@@ -543,6 +546,8 @@ pub fn export(
             ("time_offset_ns".into(), ns(shift_s).to_string()),
             ("time_offset_s".into(), offset_s),
             ("clock_unsynced".into(), clock.unsynced().to_string()),
+            // /radar/points are in the session's radar axes, not ROS's (milliego import reads this).
+            ("radar_axes".into(), RADAR_AXES.into()),
         ]),
     })
     .map_err(mcap_err)?;

@@ -28,6 +28,9 @@ pub struct RawMessage<'a> {
     pub encoding: Encoding,
 }
 
+/// A named metadata record: `(name, key -> value)`.
+pub type MetadataRecord = (String, std::collections::BTreeMap<String, String>);
+
 /// A topic of a recording.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct TopicInfo {
@@ -112,6 +115,14 @@ pub trait Source {
     /// The topics, with counts and time spans (from the index or summary when the container has
     /// one, else by reading it through).
     fn topics(&mut self) -> Result<Vec<TopicInfo>, SourceError>;
+
+    /// The recording's metadata records, `(name, key -> value)` (MCAP metadata; empty for
+    /// containers without any).
+    fn metadata(
+        &mut self,
+    ) -> Result<Vec<(String, std::collections::BTreeMap<String, String>)>, SourceError> {
+        Ok(Vec::new())
+    }
 
     /// Calls `f` on every message of the named topics (all topics when `topics` is empty), in the
     /// order stored (per topic that is log-time order for every container this crate reads).
