@@ -684,3 +684,99 @@ impl Source for Ros2Bag {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// As rosbag2 (Humble, yaml-cpp) writes it: quoted and multi-line QoS strings, `files`.
+    const HUMBLE: &str = r#"rosbag2_bagfile_information:
+  version: 5
+  storage_identifier: sqlite3
+  duration:
+    nanoseconds: 1000
+  starting_time:
+    nanoseconds_since_epoch: 1700000000000000000
+  message_count: 3
+  topics_with_message_count:
+    - topic_metadata:
+        name: /radar/points
+        type: sensor_msgs/msg/PointCloud2
+        serialization_format: cdr
+        offered_qos_profiles: "- history: 3\n  depth: 0\n  reliability: 1\n  durability: 2\n  deadline:\n    sec: 9223372036\n    nsec: 854775807\n  lifespan:\n    sec: 9223372036\n    nsec: 854775807\n  liveliness: 1\n  liveliness_lease_duration:\n    sec: 9223372036\n    nsec: 854775807\n  avoid_ros_namespace_conventions: false"
+      message_count: 3
+    - topic_metadata:
+        name: "/imu"
+        type: 'sensor_msgs/msg/Imu'
+        serialization_format: cdr
+        offered_qos_profiles: ""
+      message_count: 0
+  compression_format: ""
+  compression_mode: ""
+  relative_file_paths:
+    - bag/bag_0.db3
+  files:
+    - path: bag_0.db3
+      starting_time:
+        nanoseconds_since_epoch: 1700000000000000000
+      duration:
+        nanoseconds: 1000
+      message_count: 3
+"#;
+
+    #[test]
+    fn rosbag2_metadata() {
+        let m = Metadata::parse(HUMBLE, Path::new("m.yaml"), Path::new("/nonexistent")).unwrap();
+        assert_eq!(m.version, 5);
+        assert_eq!(m.storage, Storage::Sqlite3);
+        assert_eq!(m.compression, Compression::None);
+        assert_eq!(m.files, [PathBuf::from("/nonexistent/bag/bag_0.db3")]);
+        assert_eq!(m.topics.len(), 2);
+        assert_eq!(m.topics[0].name, "/radar/points");
+        assert_eq!(m.topics[0].message_count, 3);
+        assert_eq!(m.topics[1].name, "/imu");
+        assert_eq!(m.topics[1].msg_type, "sensor_msgs/msg/Imu");
+        assert_eq!(m.topics[1].serialization_format, "cdr");
+
+        // Older layouts: no compression keys, an empty topic list in flow style; upper-case
+        // mode names.
+        let old = "rosbag2_bagfile_information:\n  version: 2\n  storage_identifier: mcap\n  \
+                   relative_file_paths: [x.mcap]\n  topics_with_message_count: []\n";
+        let m = Metadata::parse(old, Path::new("m.yaml"), Path::new("d")).unwrap();
+        assert_eq!(
+            (m.storage, m.compression),
+            (Storage::Mcap, Compression::None)
+        );
+        assert!(m.topics.is_empty());
+        let msg = HUMBLE
+            .replace("compression_format: \"\"", "compression_format: zstd")
+            .replace("compression_mode: \"\"", "compression_mode: MESSAGE");
+        let m = Metadata::parse(&msg, Path::new("m.yaml"), Path::new("d")).unwrap();
+        assert_eq!(m.compression, Compression::Message);
+    }
+
+    #[test]
+    fn metadata_errors_name_the_key() {
+        let p = Path::new("bag/metadata.yaml");
+        let e = Metadata::parse(
+            &HUMBLE.replace("        type: 'sensor_msgs/msg/Imu'\n", ""),
+            p,
+            p,
+        )
+        .unwrap_err();
+        let s = e.to_string();
+        assert!(s.starts_with("bag/metadata.yaml"), "{s}");
+        assert!(
+            s.contains(
+                "rosbag2_bagfile_information.topics_with_message_count[1].topic_metadata.type"
+            ),
+            "{s}"
+        );
+        let e = Metadata::parse("other: 1\n", p, p).unwrap_err();
+        assert!(e.to_string().contains("rosbag2_bagfile_information"), "{e}");
+        let e = Metadata::parse(&HUMBLE.replace("version: 5", "version: five"), p, p).unwrap_err();
+        assert!(e.to_string().contains("not an integer"), "{e}");
+        assert!(Metadata::parse("", p, p).is_err());
+        assert!(Metadata::parse("- [", p, p).is_err());
+    }
+}
