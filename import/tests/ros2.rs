@@ -573,3 +573,102 @@ fn open_dispatches_on_directory_and_magic() {
         Err(SourceError::UnknownFormat { .. })
     ));
 }
+
+#[test]
+fn mcap_ros1_channels() {
+    let Some((dir, manifest)) = fixtures() else {
+        return;
+    };
+    let want = manifest["ros1"].as_array().unwrap();
+    let mut f = McapFile::open(&dir.join("ros1.mcap")).unwrap();
+    let topics = sorted(f.topics().unwrap());
+    assert_eq!(
+        topics
+            .iter()
+            .map(|t| (t.topic.as_str(), t.msg_type.as_str(), t.count))
+            .collect::<Vec<_>>(),
+        [
+            ("/hdr1", "std_msgs/Header", 4),
+            ("/imu1", "sensor_msgs/Imu", 4)
+        ]
+    );
+    let got = read_all(&mut f, &[]).unwrap();
+    assert_eq!(got.len(), want.len());
+    for (g, w) in got.iter().zip(want) {
+        assert_eq!(g.encoding, Encoding::Ros1);
+        assert_eq!(g.topic, w["topic"].as_str().unwrap());
+        assert_eq!(g.msg_type, w["type"].as_str().unwrap());
+        assert_eq!(g.log_time_ns, w["log_time_ns"].as_u64().unwrap());
+        assert_eq!(g.data, unhex(w["payload"].as_str().unwrap()));
+        let h = if g.topic == "/imu1" {
+            let imu = Imu::decode(&g.data, Encoding::Ros1).unwrap();
+            assert_eq!(imu.angular_velocity[0], w["gyro_x"].as_f64().unwrap());
+            assert_eq!(imu.linear_acceleration, [0.0, 0.125, 9.8125]);
+            imu.header
+        } else {
+            Header::decode(&g.data, Encoding::Ros1).unwrap()
+        };
+        assert_eq!(h.seq, Some(w["seq"].as_u64().unwrap() as u32));
+        assert_eq!(h.stamp_ns, w["stamp_ns"].as_i64().unwrap());
+        assert_eq!(h.frame_id, w["frame_id"].as_str().unwrap());
+    }
+}
+
+/// A bag of two storage files (the same file twice under two names): the files are read in
+/// `relative_file_paths` order, topics merge, and the per-topic index runs on across files.
+#[test]
+fn multi_file_bags() {
+    let Some((dir, manifest)) = fixtures() else {
+        return;
+    };
+    for (bag_name, file, ext) in [
+        ("sqlite_bag", "sqlite_bag.db3", "db3"),
+        ("mcap_bag", "mcap_bag.mcap", "mcap"),
+    ] {
+        let scratch = tempfile::tempdir().unwrap();
+        let bag = scratch.path().join("bag");
+        std::fs::create_dir_all(&bag).unwrap();
+        for n in ["a", "b"] {
+            std::fs::copy(
+                dir.join(bag_name).join(file),
+                bag.join(format!("{n}.{ext}")),
+            )
+            .unwrap();
+        }
+        let yaml = std::fs::read_to_string(dir.join(bag_name).join("metadata.yaml")).unwrap();
+        let yaml = yaml.replace(
+            &format!("relative_file_paths:\n  - {file}"),
+            &format!("relative_file_paths:\n  - a.{ext}\n  - b.{ext}"),
+        );
+        assert!(yaml.contains("b.db3") || yaml.contains("b.mcap"), "{yaml}");
+        std::fs::write(bag.join("metadata.yaml"), yaml).unwrap();
+        let one = expected(manifest, bag_name);
+        let mut b = Ros2Bag::open(&bag).unwrap();
+        assert_eq!(
+            b.metadata().files,
+            [bag.join(format!("a.{ext}")), bag.join(format!("b.{ext}"))]
+        );
+        let topics = sorted(b.topics().unwrap());
+        let want_topics: Vec<_> = expected_topics(&one)
+            .into_iter()
+            .map(|t| TopicInfo {
+                count: 2 * t.count,
+                ..t
+            })
+            .collect();
+        assert_eq!(topics, want_topics, "{bag_name}");
+        let got = read_all(&mut b, &["/imu/data"]).unwrap();
+        assert_eq!(got.len(), 10);
+        for (i, g) in got.iter().enumerate() {
+            assert_eq!(g.index, i as u64, "{bag_name}");
+            assert_eq!(
+                g.data,
+                one.iter()
+                    .filter(|m| m.topic == "/imu/data")
+                    .nth(i % 5)
+                    .unwrap()
+                    .data
+            );
+        }
+    }
+}

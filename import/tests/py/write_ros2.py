@@ -10,6 +10,8 @@ writes into OUTDIR:
   plain_zstd.mcap, plain_lz4.mcap, plain_none.mcap
                     plain MCAP, ros2 profile, chunks of that compression, small chunks so
                     there are several (mcap + mcap_ros2 writers)
+  ros1.mcap         plain MCAP, ros1 profile: `ros1` channels (mcap writer, rosbags
+                    ROS1_NOETIC serialize_ros1), its own messages under "ros1"
 
 and prints a JSON manifest on stdout:
   {"messages": [{"topic", "type", "log_time_ns", "check": {...known values...}}, ...],
@@ -268,6 +270,64 @@ def write_plain_mcap(path, msgs, compression):
     return payloads
 
 
+def write_ros1_mcap(path):
+    """Imu and Header with ros1 encoding; returns [{topic, type, log_time_ns, seq, payload}]."""
+    from mcap.writer import Writer as McapWriter
+
+    ts1 = get_typestore(Stores.ROS1_NOETIC)
+    t1 = ts1.types
+    out = []
+    with open(path, "wb") as f:
+        w = McapWriter(f, chunk_size=400, compression=CompressionType.ZSTD)
+        w.start(profile="ros1", library="write_ros2.py")
+        chans = {}
+        for topic, ty in [("/imu1", "sensor_msgs/msg/Imu"), ("/hdr1", "std_msgs/msg/Header")]:
+            name = ty.replace("/msg/", "/")
+            sid = w.register_schema(name, "ros1msg", ts1.generate_msgdef(ty)[0].encode())
+            chans[topic] = (w.register_channel(topic, "ros1", sid), ty, name)
+        for i in range(4):
+            for k, topic in enumerate(["/imu1", "/hdr1"]):
+                cid, ty, name = chans[topic]
+                log_time = T0 + i * 5_000_000 + k * 1_000_000
+                stamp = log_time - 1000
+                hdr = t1["std_msgs/msg/Header"](
+                    seq=100 + i,
+                    stamp=t1["builtin_interfaces/msg/Time"](
+                        sec=stamp // 10**9, nanosec=stamp % 10**9
+                    ),
+                    frame_id=f"f{i}",
+                )
+                if topic == "/hdr1":
+                    msg = hdr
+                else:
+                    V3, Q = t1["geometry_msgs/msg/Vector3"], t1["geometry_msgs/msg/Quaternion"]
+                    msg = t1["sensor_msgs/msg/Imu"](
+                        header=hdr,
+                        orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0),
+                        orientation_covariance=np.zeros(9),
+                        angular_velocity=V3(x=0.25 * i, y=0.0, z=-0.5),
+                        angular_velocity_covariance=np.zeros(9),
+                        linear_acceleration=V3(x=0.0, y=0.125, z=9.8125),
+                        linear_acceleration_covariance=np.zeros(9),
+                    )
+                data = ts1.serialize_ros1(msg, ty)
+                w.add_message(cid, log_time, bytes(data), log_time)
+                out.append(
+                    {
+                        "topic": topic,
+                        "type": name,
+                        "log_time_ns": log_time,
+                        "seq": 100 + i,
+                        "stamp_ns": stamp,
+                        "frame_id": f"f{i}",
+                        "gyro_x": 0.25 * i,
+                        "payload": bytes(data).hex(),
+                    }
+                )
+        w.finish()
+    return out
+
+
 def main():
     out = Path(sys.argv[1])
     msgs = messages()
@@ -292,6 +352,7 @@ def main():
             {"topic": t, "type": ty, "log_time_ns": lt, "check": c} for t, ty, lt, _, c in msgs
         ],
         "files": files,
+        "ros1": write_ros1_mcap(out / "ros1.mcap"),
     }
     json.dump(manifest, sys.stdout)
 
