@@ -383,7 +383,8 @@ impl McapFile {
         let mut head = [0u8; 9];
         file.read_exact(&mut head).ok()?;
         let len = u64::from_le_bytes(head[1..].try_into().ok()?);
-        if head[0] != op::MESSAGE_INDEX || len > self.size.saturating_sub(offset.saturating_add(9)) {
+        if head[0] != op::MESSAGE_INDEX || len > self.size.saturating_sub(offset.saturating_add(9))
+        {
             return None;
         }
         let mut body = vec![0u8; usize::try_from(len).ok()?];
