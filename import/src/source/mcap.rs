@@ -1,21 +1,440 @@
 //! MCAP files (ros2 profile: `cdr` channels; `ros1` channels too).
+//!
+//! Read with the `mcap` crate's sans-io readers fed from a [`File`]: no mmap (this crate forbids
+//! `unsafe`) and never the whole file in memory. [`McapFile::for_each`] streams the data section
+//! in file order through [`LinearReader`], which holds at most one record and the chunk it is
+//! decompressing (zstd, lz4 or none). [`McapFile::topics`] comes from the summary section
+//! (channels, statistics, and the message index records for the time spans) when the file has
+//! one, else from reading the file through.
+//!
+//! Only channels whose `message_encoding` is `cdr` ([`Encoding::Cdr`]) or `ros1`
+//! ([`Encoding::Ros1`]) are listed and read; the message type is the channel's schema name,
+//! normalised to `pkg/Type` (empty when the channel has no schema).
 
 use super::{RawMessage, Source, SourceError, TopicInfo};
+use crate::ros::{normalise_type, Encoding};
+use crate::ImportError;
+use mcap::records::{op, Record};
+use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+use mcap::sans_io::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
 /// The first bytes of an MCAP file.
 pub const MAGIC: &[u8] = &[0x89, b'M', b'C', b'A', b'P', 0x30, b'\r', b'\n'];
 
+/// The most bytes handed to the reader per `read` call \[B\]. The reader's buffer grows only as
+/// data actually arrives, so a corrupt record length cannot make it allocate more than the file
+/// holds.
+const READ_PIECE: usize = 1 << 20;
+
+/// The largest record (message, schema, ...) read \[B\]: the reader allocates a record's length
+/// before decompressing it, so a corrupt length inside a compressed chunk must be refused, not
+/// allocated. 256 MiB is far above any message this crate reads (a radar cloud is kilobytes to
+/// a few megabytes).
+pub const MAX_RECORD_BYTES: usize = 256 << 20;
+
 /// An MCAP file opened for reading.
 #[derive(Debug)]
 pub struct McapFile {
+    /// The file as errors and [`Source::path`] name it.
     path: PathBuf,
+    /// The file read (differs from `path` for a decompressed copy).
+    file: PathBuf,
+    size: u64,
+    /// `file` is a decompressed copy of `path`: offsets in errors are into the decompressed data.
+    decompressed: bool,
+}
+
+/// A channel as the reader resolved it.
+#[derive(Debug)]
+struct Chan {
+    topic: String,
+    msg_type: String,
+    /// `None` for encodings this crate does not decode (json, protobuf, ...).
+    encoding: Option<Encoding>,
+}
+
+impl Chan {
+    fn new(topic: &str, schema_name: Option<&str>, message_encoding: &str) -> Chan {
+        Chan {
+            topic: topic.to_string(),
+            msg_type: schema_name.map(normalise_type).unwrap_or_default(),
+            encoding: encoding_of(message_encoding),
+        }
+    }
+}
+
+/// `cdr` -> CDR, `ros1` -> ROS 1, anything else -> none.
+fn encoding_of(message_encoding: &str) -> Option<Encoding> {
+    match message_encoding {
+        "cdr" => Some(Encoding::Cdr),
+        "ros1" => Some(Encoding::Ros1),
+        _ => None,
+    }
+}
+
+/// Adds a channel's counts to the topic list, merging channels of the same topic and type.
+fn add_topic(out: &mut Vec<TopicInfo>, chan: &Chan, count: u64, span: Option<(u64, u64)>) {
+    if chan.encoding.is_none() {
+        return;
+    }
+    if let Some(t) = out
+        .iter_mut()
+        .find(|t| t.topic == chan.topic && t.msg_type == chan.msg_type)
+    {
+        t.count += count;
+        t.span_ns = merge_span(t.span_ns, span);
+    } else {
+        out.push(TopicInfo {
+            topic: chan.topic.clone(),
+            msg_type: chan.msg_type.clone(),
+            count,
+            span_ns: span,
+        });
+    }
+}
+
+/// A log-time span \[ns\]: first and last (none when empty).
+pub(crate) type Span = Option<(u64, u64)>;
+
+/// A message handler of [`McapFile::scan`]: channel, log time \[ns\], payload.
+type OnMessage<'a, E> = dyn FnMut(&Chan, u64, &[u8]) -> Result<(), E> + 'a;
+
+/// The union of two time spans \[ns\].
+pub(crate) fn merge_span(a: Span, b: Span) -> Span {
+    match (a, b) {
+        (Some((a0, a1)), Some((b0, b1))) => Some((a0.min(b0), a1.max(b1))),
+        (x, None) | (None, x) => x,
+    }
 }
 
 impl McapFile {
     /// Opens `path` and checks its magic.
     pub fn open(path: &Path) -> Result<McapFile, SourceError> {
-        Ok(McapFile { path: path.into() })
+        Self::open_copy(path, path)
+    }
+
+    /// Opens `file`, a decompressed copy of `path`; errors name `path`.
+    pub(crate) fn open_copy(file: &Path, path: &Path) -> Result<McapFile, SourceError> {
+        let mut f = File::open(file).map_err(|error| SourceError::Io {
+            path: path.into(),
+            error,
+        })?;
+        let size = f
+            .metadata()
+            .map_err(|error| SourceError::Io {
+                path: path.into(),
+                error,
+            })?
+            .len();
+        let mut head = [0u8; 8];
+        let mut n = 0;
+        while n < head.len() {
+            match f.read(&mut head[n..]) {
+                Ok(0) => break,
+                Ok(k) => n += k,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(error) => {
+                    return Err(SourceError::Io {
+                        path: path.into(),
+                        error,
+                    })
+                }
+            }
+        }
+        if &head[..n] != MAGIC {
+            let why = format!("starts with {:02x?}, not the MCAP magic", &head[..n]);
+            return Err(if file == path {
+                SourceError::UnknownFormat {
+                    path: path.into(),
+                    why,
+                }
+            } else {
+                SourceError::Corrupt {
+                    path: path.into(),
+                    at: 0,
+                    why: format!("decompressed, it {why}"),
+                }
+            });
+        }
+        Ok(McapFile {
+            path: path.into(),
+            file: file.into(),
+            size,
+            decompressed: file != path,
+        })
+    }
+
+    /// File size \[B\].
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+
+    fn io(&self, error: std::io::Error) -> SourceError {
+        SourceError::Io {
+            path: self.path.clone(),
+            error,
+        }
+    }
+
+    fn corrupt(&self, at: u64, why: impl Into<String>) -> SourceError {
+        let mut why = why.into();
+        if self.decompressed {
+            why.push_str(" (offset into the decompressed file)");
+        }
+        SourceError::Corrupt {
+            path: self.path.clone(),
+            at,
+            why,
+        }
+    }
+
+    fn mcap_err(&self, at: u64, e: &mcap::McapError) -> SourceError {
+        let why = match e {
+            mcap::McapError::UnexpectedEof => {
+                "the file ends inside a record (truncated?)".to_string()
+            }
+            mcap::McapError::RecordTooLarge { opcode, len } => format!(
+                "record (opcode {opcode:#04x}) of {len} B, over the {} MiB limit (corrupt?)",
+                MAX_RECORD_BYTES >> 20
+            ),
+            mcap::McapError::UnsupportedCompression(c) => {
+                return SourceError::Unsupported {
+                    path: self.path.clone(),
+                    what: format!("MCAP chunk compression `{c}`"),
+                }
+            }
+            e => e.to_string(),
+        };
+        self.corrupt(at, why)
+    }
+
+    /// Reads the data section in file order, calling `on_channel` for every channel record
+    /// (first sighting of each id) and `on_message` for every message whose channel
+    /// `wanted` accepts. Errors name the byte offset read up to when the problem showed.
+    fn scan<E: From<SourceError>>(
+        &self,
+        wanted: &dyn Fn(&Chan) -> bool,
+        on_channel: &mut dyn FnMut(u16, &Chan) -> Result<(), E>,
+        on_message: &mut OnMessage<'_, E>,
+    ) -> Result<(), E> {
+        let mut file = File::open(&self.file).map_err(|e| self.io(e))?;
+        let mut reader = LinearReader::new_with_options(
+            LinearReaderOptions::default()
+                .with_validate_chunk_crcs(true)
+                .with_validate_data_section_crc(true)
+                .with_record_length_limit(MAX_RECORD_BYTES),
+        );
+        let mut schemas: HashMap<u16, String> = HashMap::new();
+        // Channel id -> (channel, wanted).
+        let mut chans: HashMap<u16, (Chan, bool)> = HashMap::new();
+        // Bytes handed to the reader so far: where reading stopped when an error shows.
+        let mut fed: u64 = 0;
+        let mut past_data_end = false;
+        while let Some(event) = reader.next_event() {
+            let event = event.map_err(|e| self.mcap_err(fed, &e))?;
+            match event {
+                LinearReadEvent::ReadRequest(need) => {
+                    let buf = reader.insert(need.clamp(1, READ_PIECE));
+                    let n = loop {
+                        match file.read(buf) {
+                            Ok(n) => break n,
+                            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                            Err(e) => return Err(self.io(e).into()),
+                        }
+                    };
+                    fed += n as u64;
+                    reader.notify_read(n);
+                }
+                LinearReadEvent::Record { opcode, data } => {
+                    if opcode == op::DATA_END {
+                        // The summary repeats schemas and channels; read on only to check the
+                        // footer and end magic.
+                        past_data_end = true;
+                        continue;
+                    }
+                    if past_data_end || !matches!(opcode, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
+                        continue;
+                    }
+                    let record =
+                        mcap::parse_record(opcode, data).map_err(|e| self.mcap_err(fed, &e))?;
+                    match record {
+                        Record::Schema { header, .. } => {
+                            schemas.insert(header.id, header.name);
+                        }
+                        Record::Channel(c) => {
+                            if chans.contains_key(&c.id) {
+                                continue;
+                            }
+                            let schema = match c.schema_id {
+                                0 => None,
+                                id => Some(schemas.get(&id).ok_or_else(|| {
+                                    self.corrupt(
+                                        fed,
+                                        format!(
+                                            "channel {} (`{}`) refers to schema {id}, not \
+                                             defined before it",
+                                            c.id, c.topic
+                                        ),
+                                    )
+                                })?),
+                            };
+                            let chan = Chan::new(
+                                &c.topic,
+                                schema.map(String::as_str),
+                                &c.message_encoding,
+                            );
+                            on_channel(c.id, &chan)?;
+                            let w = wanted(&chan);
+                            chans.insert(c.id, (chan, w));
+                        }
+                        Record::Message { header, data } => {
+                            let (chan, w) = chans.get(&header.channel_id).ok_or_else(|| {
+                                self.corrupt(
+                                    fed,
+                                    format!(
+                                        "message (sequence {}) on channel {}, not defined \
+                                         before it",
+                                        header.sequence, header.channel_id
+                                    ),
+                                )
+                            })?;
+                            if *w {
+                                on_message(chan, header.log_time, &data)?;
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The summary section, if the file has one that reads cleanly.
+    fn summary(&self) -> Option<mcap::Summary> {
+        let mut file = File::open(&self.file).ok()?;
+        let limit = usize::try_from(self.size).unwrap_or(usize::MAX);
+        let mut reader = SummaryReader::new_with_options(
+            SummaryReaderOptions::default()
+                .with_file_size(self.size)
+                .with_record_length_limit(limit),
+        );
+        while let Some(event) = reader.next_event() {
+            match event.ok()? {
+                SummaryReadEvent::ReadRequest(need) => {
+                    let n = file.read(reader.insert(need.min(READ_PIECE))).ok()?;
+                    reader.notify_read(n);
+                }
+                SummaryReadEvent::SeekRequest(to) => {
+                    let pos = file.seek(to).ok()?;
+                    reader.notify_seeked(pos);
+                }
+            }
+        }
+        reader.finish()
+    }
+
+    /// Topics from the summary: counts from the statistics, spans from the message indexes.
+    /// `None` when anything needed is missing or disagrees (then the file is read through).
+    fn topics_from_summary(&self) -> Option<Vec<TopicInfo>> {
+        let summary = self.summary()?;
+        let stats = summary.stats.as_ref()?;
+        let mut file = File::open(&self.file).ok()?;
+        // Channel id -> (indexed messages, span).
+        let mut indexed: BTreeMap<u16, (u64, Option<(u64, u64)>)> = BTreeMap::new();
+        for chunk in &summary.chunk_indexes {
+            for (&channel, &offset) in &chunk.message_index_offsets {
+                let (n, span) = self.read_message_index(&mut file, channel, offset)?;
+                let e = indexed.entry(channel).or_insert((0, None));
+                e.0 += n;
+                e.1 = merge_span(e.1, span);
+            }
+        }
+        let mut out = Vec::new();
+        for (id, channel) in summary.channels.iter().collect::<BTreeMap<_, _>>() {
+            let count = stats.channel_message_counts.get(id).copied().unwrap_or(0);
+            let (n, span) = indexed.get(id).copied().unwrap_or((0, None));
+            if n != count {
+                // Messages outside chunks, or an index that disagrees: read it through.
+                return None;
+            }
+            let chan = Chan::new(
+                &channel.topic,
+                channel.schema.as_ref().map(|s| s.name.as_str()),
+                &channel.message_encoding,
+            );
+            add_topic(&mut out, &chan, count, span);
+        }
+        Some(out)
+    }
+
+    /// One message index record: (messages, their log-time span).
+    fn read_message_index(
+        &self,
+        file: &mut File,
+        channel: u16,
+        offset: u64,
+    ) -> Option<(u64, Option<(u64, u64)>)> {
+        file.seek(SeekFrom::Start(offset)).ok()?;
+        let mut head = [0u8; 9];
+        file.read_exact(&mut head).ok()?;
+        let len = u64::from_le_bytes(head[1..].try_into().ok()?);
+        if head[0] != op::MESSAGE_INDEX || len > self.size.saturating_sub(offset.saturating_add(9))
+        {
+            return None;
+        }
+        let mut body = vec![0u8; usize::try_from(len).ok()?];
+        file.read_exact(&mut body).ok()?;
+        match mcap::parse_record(op::MESSAGE_INDEX, &body).ok()? {
+            Record::MessageIndex(ix) if ix.channel_id == channel => {
+                let span = ix
+                    .records
+                    .iter()
+                    .fold(None, |s, e| merge_span(s, Some((e.log_time, e.log_time))));
+                Some((ix.records.len() as u64, span))
+            }
+            _ => None,
+        }
+    }
+
+    fn topics_by_reading(&self) -> Result<Vec<TopicInfo>, SourceError> {
+        // Channels in order of appearance, and per (topic, type) the count and span.
+        let mut seen: Vec<Chan> = Vec::new();
+        let mut counts: HashMap<(String, String), (u64, Span)> = HashMap::new();
+        self.scan::<SourceError>(
+            &|c| c.encoding.is_some(),
+            &mut |_, c| {
+                seen.push(Chan {
+                    topic: c.topic.clone(),
+                    msg_type: c.msg_type.clone(),
+                    encoding: c.encoding,
+                });
+                Ok(())
+            },
+            &mut |c, t, _| {
+                let e = counts
+                    .entry((c.topic.clone(), c.msg_type.clone()))
+                    .or_insert((0, None));
+                e.0 += 1;
+                e.1 = merge_span(e.1, Some((t, t)));
+                Ok(())
+            },
+        )?;
+        let mut out = Vec::new();
+        for chan in &seen {
+            // Take each (topic, type) once: the counts are already merged.
+            if let Some((count, span)) = counts.remove(&(chan.topic.clone(), chan.msg_type.clone()))
+            {
+                add_topic(&mut out, chan, count, span);
+            } else {
+                add_topic(&mut out, chan, 0, None);
+            }
+        }
+        Ok(out)
     }
 }
 
@@ -23,17 +442,62 @@ impl Source for McapFile {
     fn path(&self) -> &Path {
         &self.path
     }
+
+    /// From the summary section when present and consistent, else by reading the file through.
     fn topics(&mut self) -> Result<Vec<TopicInfo>, SourceError> {
-        Err(SourceError::Unsupported {
-            path: self.path.clone(),
-            what: "MCAP (reader not written yet)".into(),
-        })
+        match self.topics_from_summary() {
+            Some(t) => Ok(t),
+            None => self.topics_by_reading(),
+        }
     }
+
+    /// Messages in file order. Asking for a topic whose channel has an encoding other than `cdr`
+    /// or `ros1` is [`SourceError::Unsupported`]; with `topics` empty such channels are skipped.
     fn for_each(
         &mut self,
-        _topics: &[&str],
-        _f: &mut dyn FnMut(RawMessage<'_>) -> Result<(), crate::ImportError>,
-    ) -> Result<(), crate::ImportError> {
-        Err(self.topics().unwrap_err().into())
+        topics: &[&str],
+        f: &mut dyn FnMut(RawMessage<'_>) -> Result<(), ImportError>,
+    ) -> Result<(), ImportError> {
+        let mut index: HashMap<String, u64> = HashMap::new();
+        let path = self.path.clone();
+        let wanted = |c: &Chan| {
+            c.encoding.is_some() && (topics.is_empty() || topics.contains(&c.topic.as_str()))
+        };
+        self.scan(
+            &wanted,
+            &mut |_, c| {
+                if c.encoding.is_none() && topics.contains(&c.topic.as_str()) {
+                    return Err(SourceError::Unsupported {
+                        path: path.clone(),
+                        what: format!("topic `{}`: message encoding is not cdr or ros1", c.topic),
+                    }
+                    .into());
+                }
+                Ok(())
+            },
+            &mut |c, log_time_ns, data| {
+                let i = match index.get_mut(&c.topic) {
+                    Some(i) => {
+                        *i += 1;
+                        *i
+                    }
+                    None => {
+                        index.insert(c.topic.clone(), 0);
+                        0
+                    }
+                };
+                let Some(encoding) = c.encoding else {
+                    return Ok(());
+                };
+                f(RawMessage {
+                    topic: &c.topic,
+                    msg_type: &c.msg_type,
+                    log_time_ns,
+                    index: i,
+                    data,
+                    encoding,
+                })
+            },
+        )
     }
 }
