@@ -438,9 +438,49 @@ impl McapFile {
     }
 }
 
+impl McapFile {
+    /// Every metadata record of the data section, in file order.
+    fn metadata_records(&self) -> Result<Vec<super::MetadataRecord>, SourceError> {
+        let mut file = File::open(&self.file).map_err(|e| self.io(e))?;
+        let mut reader = LinearReader::new_with_options(
+            LinearReaderOptions::default().with_record_length_limit(MAX_RECORD_BYTES),
+        );
+        let mut out = Vec::new();
+        let mut fed: u64 = 0;
+        while let Some(event) = reader.next_event() {
+            match event.map_err(|e| self.mcap_err(fed, &e))? {
+                LinearReadEvent::ReadRequest(need) => {
+                    let buf = reader.insert(need.clamp(1, READ_PIECE));
+                    let n = file.read(buf).map_err(|e| self.io(e))?;
+                    fed += n as u64;
+                    reader.notify_read(n);
+                }
+                LinearReadEvent::Record { opcode, data } => {
+                    if opcode == op::DATA_END {
+                        break;
+                    }
+                    if opcode != op::METADATA {
+                        continue;
+                    }
+                    if let Record::Metadata(m) =
+                        mcap::parse_record(opcode, data).map_err(|e| self.mcap_err(fed, &e))?
+                    {
+                        out.push((m.name, m.metadata));
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
 impl Source for McapFile {
     fn path(&self) -> &Path {
         &self.path
+    }
+
+    fn metadata(&mut self) -> Result<Vec<super::MetadataRecord>, SourceError> {
+        self.metadata_records()
     }
 
     /// From the summary section when present and consistent, else by reading the file through.

@@ -118,9 +118,7 @@ pub trait Source {
 
     /// The recording's metadata records, `(name, key -> value)` (MCAP metadata; empty for
     /// containers without any).
-    fn metadata(
-        &mut self,
-    ) -> Result<Vec<(String, std::collections::BTreeMap<String, String>)>, SourceError> {
+    fn metadata(&mut self) -> Result<Vec<MetadataRecord>, SourceError> {
         Ok(Vec::new())
     }
 
