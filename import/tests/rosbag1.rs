@@ -309,7 +309,7 @@ fn read_through(
 /// Offsets to cut or flip at: a stride over the whole bag, and every byte around the start of
 /// the first chunk (its record header, the first records inside) and of the index section.
 fn offsets(len: usize, index_pos: usize, stride: usize) -> Vec<usize> {
-    let first_chunk = MAGIC.len() + 4096 + 4;
+    let first_chunk = MAGIC.len() + 4096;
     let mut v: Vec<usize> = (0..len).step_by(stride).collect();
     v.extend(first_chunk - 8..(first_chunk + 160).min(len));
     v.extend(index_pos - 8..(index_pos + 160).min(len));
@@ -585,4 +585,34 @@ fn not_a_bag_is_an_unknown_format() {
         source::open(&p),
         Err(SourceError::UnknownFormat { .. })
     ));
+}
+
+#[test]
+fn topics_come_from_the_index_without_reading_chunks() {
+    let Some(w) = write_bags() else { return };
+    let topics = expected_topics(&w.manifest);
+    let dir = tempfile::tempdir().unwrap();
+    for c in ["none", "bz2"] {
+        let mut bytes = std::fs::read(w.bag(c)).unwrap();
+        // Damage the first chunk's data (not its record header): in `none` the length of the
+        // first record inside, in `bz2` a byte of the stream (its CRC then fails).
+        let chunk = MAGIC.len() + 4096;
+        let header_len = u32::from_le_bytes(bytes[chunk..chunk + 4].try_into().unwrap()) as usize;
+        let data = chunk + 4 + header_len + 4;
+        let at = if c == "none" { data } else { data + 40 };
+        bytes[at..at + 4].copy_from_slice(&[0xff; 4]);
+        let p = dir.path().join(format!("{c}.bag"));
+        std::fs::write(&p, &bytes).unwrap();
+        let mut bag = Bag1::open(&p).unwrap();
+        assert_eq!(bag.topics().unwrap(), topics, "{c}: from the index");
+        match read_all(&mut bag, &[]) {
+            Err(ImportError::Source(SourceError::Corrupt { at: e, .. })) => {
+                assert!(
+                    e as usize == chunk || e as usize == data,
+                    "{c}: error at {e}"
+                )
+            }
+            other => panic!("{c}: {other:?}"),
+        }
+    }
 }
