@@ -40,6 +40,10 @@ pub struct ImportArgs {
     /// Calibration: rio-style YAML (l_b_r_*, q_b_r_*, radar_frame_ms) or TOML (docs/import.md).
     #[arg(long)]
     calib: Option<PathBuf>,
+    /// The chirp configuration the radar ran (.cfg), kept with the session (Doppler resolution,
+    /// frame period, exposure).
+    #[arg(long)]
+    radar_cfg: Option<PathBuf>,
     /// Axes of the scans' points: ros (x forward, y left; the default) or session (TI: x right,
     /// y boresight; what export-mcap writes).
     #[arg(long, value_parser = ["ros", "session"])]
@@ -72,6 +76,11 @@ pub fn run(a: ImportArgs) -> Result<()> {
     }
     let out = a.out.clone().ok_or("--out is required")?;
     let calib = a.calib.as_deref().map(Calibration::load).transpose()?;
+    let radar_cfg = a
+        .radar_cfg
+        .as_ref()
+        .map(|p| std::fs::read_to_string(p).map_err(|e| format!("radar .cfg {}: {e}", p.display())))
+        .transpose()?;
     let opts = ImportOptions {
         radar_topic: a.radar_topic,
         imu_topic: a.imu_topic,
@@ -85,6 +94,7 @@ pub fn run(a: ImportArgs) -> Result<()> {
             _ => RadarAxes::Ros,
         }),
         doppler_field: a.doppler_field,
+        radar_cfg,
         start_s: a.start,
         duration_s: a.duration,
         description: format!(

@@ -127,9 +127,11 @@ fn imported_bags_reproduce_the_original_accuracy() {
             ],
         ),
     ];
+    // The chirp configuration the rig ran, as a ti_mmwave_rospkg user has it.
+    let cfg = s(&orig.join("radar.cfg"));
     for (name, args) in cases {
         let dir = p(&format!("imported-{name}"));
-        let mut a: Vec<&str> = vec!["import"];
+        let mut a: Vec<&str> = vec!["import", "--radar-cfg", &cfg];
         a.extend(args.iter().map(String::as_str));
         a.extend(["-o", dir.to_str().unwrap()]);
         let report = milliego(&a);
@@ -140,6 +142,9 @@ fn imported_bags_reproduce_the_original_accuracy() {
                 "{report}"
             );
         }
+        // Every scan at its true time (the trigger re-timing), every point and IMU value as
+        // simulated (axes converted there and back).
+        assert_same_streams(&orig, &dir, name);
         let ai = ate(&dir, w, name);
         println!("{name}: ATE {ai:.4} m, original {a0:.4} m");
         assert!(
@@ -213,26 +218,32 @@ fn import_of_the_export_is_the_session() {
         "-o",
         back.to_str().unwrap(),
     ]);
-    let (r0, i0) = streams(&orig);
-    let (r1, i1) = streams(&back);
-    assert_eq!(r0.len(), r1.len(), "radar frames");
+    assert_same_streams(&orig, &back, "export");
+}
+
+/// The radar frames and IMU samples of `b` are those of `a`: points and IMU values exactly, radar
+/// times to 1 us, IMU times to the 100 us SampleTimeFine grid.
+fn assert_same_streams(a: &Path, b: &Path, name: &str) {
+    let (r0, i0) = streams(a);
+    let (r1, i1) = streams(b);
+    assert_eq!(r0.len(), r1.len(), "{name}: radar frames");
     for (k, (a, b)) in r0.iter().zip(&r1).enumerate() {
         assert!(
             (a.0 - b.0).abs() < 1e-6,
-            "frame {k}: {} s vs {} s",
+            "{name}: frame {k}: {} s vs {} s",
             a.0,
             b.0
         );
-        assert_eq!(a.1, b.1, "frame {k} points");
+        assert_eq!(a.1, b.1, "{name}: frame {k} points");
     }
-    assert_eq!(i0.len(), i1.len(), "IMU samples");
+    assert_eq!(i0.len(), i1.len(), "{name}: IMU samples");
     for (k, (a, b)) in i0.iter().zip(&i1).enumerate() {
         assert!(
             (a.0 - b.0).abs() <= 1e-4,
-            "sample {k}: {} s vs {} s",
+            "{name}: sample {k}: {} s vs {} s",
             a.0,
             b.0
         );
-        assert_eq!((a.1, a.2), (b.1, b.2), "sample {k} values");
+        assert_eq!((a.1, a.2), (b.1, b.2), "{name}: sample {k} values");
     }
 }

@@ -59,6 +59,8 @@ pub enum ImportError {
     },
     /// The calibration file cannot be used.
     Calib(calib::CalibError),
+    /// The radar `.cfg` cannot be used (the error names the line).
+    RadarCfg(radar_driver::cfg::CfgError),
     /// No sensor message could be timed.
     Empty,
     /// Writing the session failed.
@@ -86,6 +88,7 @@ impl fmt::Display for ImportError {
                  {expected:?}"
             ),
             ImportError::Calib(e) => write!(f, "{e}"),
+            ImportError::RadarCfg(e) => write!(f, "radar .cfg: {e}"),
             ImportError::Empty => f.write_str("no radar scan or IMU sample could be timed"),
             ImportError::Session(e) => write!(f, "{e}"),
         }

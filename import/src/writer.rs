@@ -48,6 +48,10 @@ pub struct ImportOptions {
     pub start_s: f64,
     /// Seconds to import (all when `None`).
     pub duration_s: Option<f64>,
+    /// The chirp configuration the radar ran (`.cfg` text): stored with the session, so the
+    /// estimators get its Doppler resolution and frame period; its active frame time is the
+    /// exposure when the calibration gives none.
+    pub radar_cfg: Option<String>,
     /// Session description.
     pub description: String,
 }
@@ -173,7 +177,7 @@ fn choose(
             "truth",
         ],
     };
-    let hinted: Vec<&&TopicInfo> = cands
+    let mut hinted: Vec<&&TopicInfo> = cands
         .iter()
         .filter(|t| {
             hints
@@ -181,6 +185,15 @@ fn choose(
                 .any(|h| t.topic.to_ascii_lowercase().contains(h))
         })
         .collect();
+    // Several telling names of different types (`/groundtruth/pose` and `/groundtruth/odom`
+    // carry the same poses): the type listed first wins.
+    if let Some(best) = hinted
+        .iter()
+        .filter_map(|t| types.iter().position(|ty| *ty == t.msg_type))
+        .min()
+    {
+        hinted.retain(|t| t.msg_type == types[best]);
+    }
     // Header and TF topics are too generic to take without a telling name.
     let generic = matches!(kind, Kind::Trigger | Kind::Truth);
     match (cands.len(), hinted.len()) {
@@ -474,7 +487,7 @@ fn time_scans(s: &Survey, calib: &Calibration, tally: &mut Tally) -> Vec<Option<
     }
     if tally.zero_stamps == 0 && !s.scans.is_empty() {
         tally.timing = "header stamps".into();
-        s.scans.iter().map(|h| Some(h.stamp_ns + half)).collect()
+        s.scans.iter().map(|h| Some(h.stamp_ns)).collect()
     } else {
         tally.timing = format!(
             "arrival (bag log time): {} of {} header stamps are zero; ti_mmwave_rospkg publishes a \
@@ -569,7 +582,17 @@ pub fn import(
             ),
         });
     }
-    let calib = opts.calib.clone().unwrap_or_default();
+    let mut calib = opts.calib.clone().unwrap_or_default();
+    // The readers take half the active chirping off a frame's ready time when the session has
+    // a .cfg, so frames are stamped that much later here.
+    let mut half_chirps_s = 0.0;
+    if let Some(text) = &opts.radar_cfg {
+        let d = radar_driver::cfg::RadarConfig::parse(text)
+            .and_then(|c| c.derive(None))
+            .map_err(ImportError::RadarCfg)?;
+        half_chirps_s = d.active_frame_time_ms / 2e3;
+        calib.radar_frame_s = calib.radar_frame_s.or(Some(d.active_frame_time_ms / 1e3));
+    }
     let mut s = survey(sources, &chosen, opts)?;
     let mut radar_tally = s.tallies.remove(&Kind::Radar);
     let scan_times = radar_tally
@@ -648,6 +671,9 @@ pub fn import(
         });
     }
     let mut w = SessionWriter::create(out, meta).map_err(ImportError::Session)?;
+    if let Some(text) = &opts.radar_cfg {
+        w.radar_cfg(text).map_err(ImportError::Session)?;
+    }
     let mut radar_w = match chosen.contains_key(&Kind::Radar) {
         true => Some(w.stream(StreamKind::Radar).map_err(ImportError::Session)?),
         false => None,
@@ -752,7 +778,7 @@ pub fn import(
                     let number = s.scans[i].seq.unwrap_or(i as u32);
                     let bytes = wire::radar_frame(
                         number,
-                        secs(t),
+                        secs(t) + half_chirps_s,
                         &pts,
                         l.snr_name.as_ref().map(|_| snr.as_slice()),
                     );
@@ -762,7 +788,7 @@ pub fn import(
                     let rw = radar_w.as_mut().expect("radar stream");
                     radar_q.pop_ready(Some(t), |t, b| {
                         radar_written += 1;
-                        write_chunk(rw, secs(t), &b, radar_baud)
+                        write_chunk(rw, secs(t) + half_chirps_s, &b, radar_baud)
                     })?;
                 }
                 Kind::Imu | Kind::Pressure => {
@@ -820,7 +846,7 @@ pub fn import(
     if let Some(rw) = radar_w.as_mut() {
         radar_q.pop_ready(None, |t, b| {
             radar_written += 1;
-            write_chunk(rw, secs(t), &b, radar_baud)
+            write_chunk(rw, secs(t) + half_chirps_s, &b, radar_baud)
         })?;
     }
     if let Some(iw) = imu_w.as_mut() {
@@ -966,6 +992,13 @@ mod tests {
             topic("/a", "sensor_msgs/PointCloud2"),
             topic("/b", "sensor_msgs/PointCloud2"),
         ];
+        let gt = vec![
+            topic("/groundtruth/odom", "nav_msgs/Odometry"),
+            topic("/groundtruth/pose", "geometry_msgs/PoseStamped"),
+            topic("/tf_static", "tf2_msgs/TFMessage"),
+        ];
+        let g = choose(Kind::Truth, None, &gt).unwrap().unwrap();
+        assert_eq!(g.topic, "/groundtruth/pose");
         let e = choose(Kind::Radar, None, &two).unwrap_err().to_string();
         assert!(
             e.contains("several candidates (/a, /b)") && e.contains("--radar-topic"),

@@ -171,7 +171,7 @@ def main():
     ti = (i.translation.x, i.translation.y, i.translation.z) if i else (0.0, 0.0, 0.0)
     imu_toml = f"[imu]\ntranslation_m = {list(ti)!r}\nrotation_wxyz = {list(qi)!r}\n"
     (out / "rig.toml").write_text(
-        f"[radar]\naxes = \"ros\"\ntranslation_m = {list(t)!r}\n"
+        f"[radar]\naxes = \"ros\"\nframe_ms = {FRAME_MS}\ntranslation_m = {list(t)!r}\n"
         f"rotation_wxyz = {[qb[3], qb[0], qb[1], qb[2]]!r}\n" + imu_toml)
     (out / "rig_session.toml").write_text(
         f"[radar]\naxes = \"session\"\ntranslation_m = {list(t)!r}\n"
