@@ -38,7 +38,10 @@ fn replay(dir: &Path, faults: &[&str]) -> (Child, String, String) {
     let mut child = Command::new(BIN)
         .arg("replay")
         .arg(dir)
-        .args(["--start-delay", "1.5", "--linger", "1"])
+        // Start once the runtime has opened both ptys (a fixed delay lost the first second of
+        // data when a loaded machine started the runtime late), then a little more for it to
+        // drop what waited in the driver.
+        .args(["--wait-open", "--start-delay", "0.3", "--linger", "1"])
         .args(faults)
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
@@ -126,6 +129,13 @@ fn run_online(dir: &Path, s: &Session, faults: &[&str]) -> Online {
         assert!(Instant::now() < deadline, "the run did not end");
     }
     assert!(run.wait().unwrap().success());
+    // The replay ends on its own once it has sent everything; if the run ended first, nobody
+    // reads the ptys and the replay could block on a full one: stop it.
+    let stop = Instant::now() + Duration::from_secs(10);
+    while rep.try_wait().unwrap().is_none() && Instant::now() < stop {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let _ = rep.kill();
     let _ = rep.wait();
     let summary = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
     Online { msgs, summary }

@@ -134,7 +134,7 @@ mod tests {
         let bytes = radar_frame(7, 30.0, &pts, Some(&[12.34, 40.0]));
         let mut d = radar_driver::host::Decoder::new(radar_driver::host::DecoderConfig::default());
         let mut got = Vec::new();
-        d.feed(&bytes, 0u32, |f| {
+        let mut keep = |f: &radar_driver::host::Decoded<'_, u32>| {
             got.push((
                 f.frame_number,
                 f.cloud
@@ -144,18 +144,9 @@ mod tests {
                     .collect::<Vec<_>>(),
                 f.cloud.snr_db.clone(),
             ))
-        });
-        d.finish(|f| {
-            got.push((
-                f.frame_number,
-                f.cloud
-                    .points
-                    .iter()
-                    .map(|p| [p.x, p.y, p.z, p.velocity])
-                    .collect::<Vec<_>>(),
-                f.cloud.snr_db.clone(),
-            ))
-        });
+        };
+        d.feed(&bytes, 0u32, &mut keep);
+        d.finish(&mut keep);
         assert_eq!(got.len(), 1);
         assert_eq!(got[0].0, 7);
         assert_eq!(got[0].1, pts.to_vec());
