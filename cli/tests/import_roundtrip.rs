@@ -1,7 +1,7 @@
 //! `milliego import` on the recordings users have, written by an independent writer (Python
 //! `rosbags`) from a simulated session with known truth: a ROS 1 bag in ti_mmwave_rospkg style
 //! (zero scan stamps, scans arriving 100-130 ms late, a hardware trigger topic), a ROS 2 bag
-//! (sqlite3), and the MCAP `export-mcap` wrote. On every imported session `milliego odometry`
+//! (sqlite3), the MCAP `export-mcap` wrote, and the CSV layout of docs/import.md. On every imported session `milliego odometry`
 //! must reproduce the original session's accuracy (ATE within 5%).
 //!
 //! Needs a Python with `rosbags`, `mcap` and `mcap-ros2-support` (`MILLIEGO_ROS_PYTHON`; a skip
@@ -100,7 +100,7 @@ fn imported_bags_reproduce_the_original_accuracy() {
 
     let a0 = ate(&orig, w, "orig");
     let bags = p("bags");
-    let cases: [(&str, Vec<String>); 3] = [
+    let cases: [(&str, Vec<String>); 4] = [
         // The export's own MCAP: its metadata says the points are in TI axes.
         (
             "mcap",
@@ -122,6 +122,14 @@ fn imported_bags_reproduce_the_original_accuracy() {
             "ti",
             vec![
                 s(&bags.join("ti.bag")),
+                "--calib".into(),
+                s(&bags.join("rig.toml")),
+            ],
+        ),
+        (
+            "csv",
+            vec![
+                s(&bags.join("csv")),
                 "--calib".into(),
                 s(&bags.join("rig.toml")),
             ],

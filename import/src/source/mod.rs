@@ -1,8 +1,10 @@
 //! Recordings as a stream of serialised messages: ROS 1 bags ([`rosbag1`]), ROS 2 bag
-//! directories with sqlite3 or MCAP storage ([`ros2`]), and plain MCAP files ([`mcap`]). Each
+//! directories with sqlite3 or MCAP storage ([`ros2`]), plain MCAP files ([`mcap`]) and
+//! directories of CSV files ([`csv`]). Each
 //! reader yields [`RawMessage`]s one at a time, holding at most one chunk in memory, and lists the
 //! topics ([`TopicInfo`]) from the container's index when it has one.
 
+pub mod csv;
 pub mod mcap;
 pub mod ros2;
 pub mod rosbag1;
@@ -136,6 +138,9 @@ pub trait Source {
 /// directory (`metadata.yaml`), or an MCAP file (its magic).
 pub fn open(path: &Path) -> Result<Box<dyn Source>, SourceError> {
     if path.is_dir() {
+        if !path.join("metadata.yaml").is_file() && csv::is_csv_dir(path) {
+            return Ok(Box::new(csv::CsvDir::open(path)?));
+        }
         return Ok(Box::new(ros2::Ros2Bag::open(path)?));
     }
     let mut head = [0u8; 13];

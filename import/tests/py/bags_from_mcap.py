@@ -8,6 +8,7 @@ independent `rosbags` writer:
              /groundtruth/pose; plus ti.yaml, a rio-style calibration.
   ros2_db3/  ROS 2 bag, sqlite3 storage: the same streams with correct header stamps, no trigger.
   rig.toml, rig_session.toml   the rig's calibration as TOML (radar in ROS / session axes).
+  csv/       the same streams in the CSV layout of docs/import.md (ROS radar axes, header times).
 
 usage: bags_from_mcap.py EXPORT.mcap OUTDIR [--compression none|bz2|lz4]
 Prints a JSON summary (messages per file and topic).
@@ -147,6 +148,27 @@ def write(path_out, ros1, radar, imu, gt, compression):
     return counts
 
 
+def write_csv(d, radar, imu, gt):
+    """The CSV layout of docs/import.md: ROS radar axes, times in seconds (repr: exact)."""
+    d.mkdir(parents=True, exist_ok=True)
+    s = lambda ns: repr(ns / 1e9)
+    with open(d / "radar.csv", "w") as f:
+        f.write("t,frame,x,y,z,doppler,snr\n")
+        for k, (t, x, y, z, v, snr) in enumerate(radar):
+            for i in range(len(x)):
+                f.write(f"{s(t)},{k},{float(y[i])!r},{float(-x[i])!r},{float(z[i])!r},{float(v[i])!r},{float(snr[i])!r}\n")
+    with open(d / "imu.csv", "w") as f:
+        f.write("t,gx,gy,gz,ax,ay,az\n")
+        for t, w, a in imu:
+            f.write(f"{s(t)},{w.x!r},{w.y!r},{w.z!r},{a.x!r},{a.y!r},{a.z!r}\n")
+    with open(d / "groundtruth.csv", "w") as f:
+        f.write("# t x y z qx qy qz qw\nt,x,y,z,qx,qy,qz,qw\n")
+        for t, p in gt:
+            q, o = p.position, p.orientation
+            f.write(f"{s(t)},{q.x!r},{q.y!r},{q.z!r},{o.x!r},{o.y!r},{o.z!r},{o.w!r}\n")
+    return {"radar.csv": len(radar), "imu.csv": len(imu), "groundtruth.csv": len(gt)}
+
+
 def main():
     src, out = Path(sys.argv[1]), Path(sys.argv[2])
     compression = "none"
@@ -176,6 +198,7 @@ def main():
     (out / "rig_session.toml").write_text(
         f"[radar]\naxes = \"session\"\ntranslation_m = {list(t)!r}\n"
         f"rotation_wxyz = {[q[3], q[0], q[1], q[2]]!r}\n" + imu_toml)
+    summary["csv"] = write_csv(out / "csv", radar, imu, gt)
     print(json.dumps(summary))
 
 
