@@ -51,10 +51,10 @@ pub struct ImportArgs {
     /// Name of the Doppler field when it is not velocity / doppler / v / radial_velocity / vel.
     #[arg(long)]
     doppler_field: Option<String>,
-    /// Skip this much from the start [s].
+    /// Skip this much from the start, in s.
     #[arg(long, default_value_t = 0.0)]
     start: f64,
-    /// Import this much [s] (default: all).
+    /// Import this much, in s (default: all).
     #[arg(long)]
     duration: Option<f64>,
 }
