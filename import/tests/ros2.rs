@@ -23,7 +23,10 @@ fn fixtures() -> Option<&'static (PathBuf, Value)> {
     static F: OnceLock<Option<(PathBuf, Value)>> = OnceLock::new();
     F.get_or_init(|| {
         let py = common::ros_python()?;
-        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("import-ros2-fixtures");
+        // One directory per process: nextest runs each test in its own process, and a shared
+        // directory was removed and rewritten under the other tests' feet.
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("import-ros2-fixtures-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let out = common::run_py(&py, "write_ros2.py", &[dir.to_str().unwrap()]);
