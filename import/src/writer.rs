@@ -246,7 +246,12 @@ struct Tally {
 
 impl Tally {
     fn drop(&mut self, why: &str) {
-        *self.dropped.entry(why.into()).or_default() += 1;
+        self.drop_n(why, 1);
+    }
+    fn drop_n(&mut self, why: &str, n: u64) {
+        if n > 0 {
+            *self.dropped.entry(why.into()).or_default() += n;
+        }
     }
     fn seen(&mut self, t: i64) {
         self.first_ns = Some(self.first_ns.map_or(t, |f| f.min(t)));
@@ -550,13 +555,11 @@ impl Reorder {
     }
 }
 
-/// Imports `sources` (read in order, as one recording) into a new session at `out`.
-pub fn import(
-    sources: &[PathBuf],
-    out: &Path,
+/// The topic of every stream the recording has (radar or IMU at least).
+fn choose_all(
     opts: &ImportOptions,
-) -> Result<ImportReport, ImportError> {
-    let topics = list(sources)?;
+    topics: &[TopicInfo],
+) -> Result<BTreeMap<Kind, TopicInfo>, ImportError> {
     let mut chosen = BTreeMap::new();
     for (k, n) in [
         (Kind::Radar, &opts.radar_topic),
@@ -565,7 +568,7 @@ pub fn import(
         (Kind::Pressure, &opts.baro_topic),
         (Kind::Truth, &opts.gt_topic),
     ] {
-        if let Some(t) = choose(k, n.as_deref(), &topics)? {
+        if let Some(t) = choose(k, n.as_deref(), topics)? {
             chosen.insert(k, t);
         }
     }
@@ -582,6 +585,64 @@ pub fn import(
             ),
         });
     }
+    Ok(chosen)
+}
+
+/// The points of a scan in the session's axes, as the radar frame carries them (`[x, y, z,
+/// velocity]` and the SNR), counting the points dropped in `tally`.
+fn scan_points(
+    l: &PointLayout,
+    c: &PointCloud2,
+    axes: RadarAxes,
+    tally: &mut Tally,
+) -> Result<(Vec<[f32; 4]>, Vec<f64>), crate::cloud::LayoutError> {
+    let mut pts = Vec::new();
+    let mut snr = Vec::new();
+    let mut bad = 0u64;
+    l.points(c, |q| {
+        let x = axes.to_session(q.xyz);
+        if x.iter().chain([&q.doppler]).any(|v| !v.is_finite()) {
+            bad += 1;
+            return;
+        }
+        pts.push([x[0] as f32, x[1] as f32, x[2] as f32, q.doppler as f32]);
+        snr.push(q.snr.unwrap_or(0.0));
+    })?;
+    tally.drop_n("point not finite", bad);
+    if pts.len() > wire::MAX_POINTS {
+        tally.drop_n(
+            "point beyond the frame limit",
+            (pts.len() - wire::MAX_POINTS) as u64,
+        );
+        pts.truncate(wire::MAX_POINTS);
+        snr.truncate(wire::MAX_POINTS);
+    }
+    Ok((pts, snr))
+}
+
+/// What the import says about a scan layout and the axes.
+fn layout_note(l: &PointLayout, axes: RadarAxes) -> String {
+    format!(
+        "Doppler from field `{}`{}; points {}",
+        l.doppler_name,
+        l.snr_name
+            .as_ref()
+            .map_or(String::new(), |n| format!(", SNR from `{n}`")),
+        match axes {
+            RadarAxes::Ros => "converted from ROS axes (x forward) to TI axes",
+            RadarAxes::Session => "kept in TI axes",
+        }
+    )
+}
+
+/// Imports `sources` (read in order, as one recording) into a new session at `out`.
+pub fn import(
+    sources: &[PathBuf],
+    out: &Path,
+    opts: &ImportOptions,
+) -> Result<ImportReport, ImportError> {
+    let topics = list(sources)?;
+    let chosen = choose_all(opts, &topics)?;
     let mut calib = opts.calib.clone().unwrap_or_default();
     // The readers take half the active chirping off a frame's ready time when the session has
     // a .cfg, so frames are stamped that much later here.
@@ -735,46 +796,15 @@ pub fn import(
                                 error,
                             },
                         )?;
-                        radar_notes.push(format!(
-                            "Doppler from field `{}`{}; points {}",
-                            l.doppler_name,
-                            l.snr_name
-                                .as_ref()
-                                .map_or(String::new(), |n| format!(", SNR from `{n}`")),
-                            match axes {
-                                RadarAxes::Ros => "converted from ROS axes (x forward) to TI axes",
-                                RadarAxes::Session => "kept in TI axes",
-                            }
-                        ));
+                        radar_notes.push(layout_note(&l, axes));
                         layouts.insert(key.clone(), l);
                     }
                     let l = &layouts[&key];
-                    let mut pts = Vec::new();
-                    let mut snr = Vec::new();
-                    let mut bad = 0u64;
-                    l.points(&c, |q| {
-                        let x = axes.to_session(q.xyz);
-                        if x.iter().chain([&q.doppler]).any(|v| !v.is_finite()) {
-                            bad += 1;
-                            return;
-                        }
-                        pts.push([x[0] as f32, x[1] as f32, x[2] as f32, q.doppler as f32]);
-                        snr.push(q.snr.unwrap_or(0.0));
-                    })
-                    .map_err(|error| ImportError::Layout {
-                        at: at(p, &m),
-                        error,
-                    })?;
-                    for _ in 0..bad {
-                        tally.drop("point not finite");
-                    }
-                    if pts.len() > wire::MAX_POINTS {
-                        for _ in wire::MAX_POINTS..pts.len() {
-                            tally.drop("point beyond the frame limit");
-                        }
-                        pts.truncate(wire::MAX_POINTS);
-                        snr.truncate(wire::MAX_POINTS);
-                    }
+                    let (pts, snr) =
+                        scan_points(l, &c, axes, tally).map_err(|error| ImportError::Layout {
+                            at: at(p, &m),
+                            error,
+                        })?;
                     let number = s.scans[i].seq.unwrap_or(i as u32);
                     let bytes = wire::radar_frame(
                         number,
