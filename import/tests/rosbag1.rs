@@ -616,3 +616,60 @@ fn topics_come_from_the_index_without_reading_chunks() {
         }
     }
 }
+
+/// The top-level chunk records of an uncompressed bag: (offset of the record, its data range).
+fn chunk_records(bytes: &[u8]) -> Vec<(usize, std::ops::Range<usize>)> {
+    let end = index_pos(bytes) as usize;
+    let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
+    let mut out = Vec::new();
+    let mut at = MAGIC.len() + 4096;
+    while at < end {
+        let header_len = u32_at(at);
+        let header = &bytes[at + 4..at + 4 + header_len];
+        let data_at = at + 4 + header_len + 4;
+        let data_len = u32_at(at + 4 + header_len);
+        if header.windows(4).any(|w| w == b"op=\x05") {
+            out.push((at, data_at..data_at + data_len));
+        }
+        at = data_at + data_len;
+    }
+    out
+}
+
+#[test]
+fn chunks_without_the_wanted_topics_are_not_read() {
+    let Some(w) = write_bags() else { return };
+    let want: Vec<Msg> = expected_messages(&w.manifest)
+        .into_iter()
+        .filter(|m| m.topic == "/pose")
+        .collect();
+    let mut bytes = std::fs::read(w.bag("none")).unwrap();
+    let chunks = chunk_records(&bytes);
+    // Break every chunk that holds no /pose payload: the first record inside claims 4 GiB.
+    let mut broken = 0;
+    for (_, data) in &chunks {
+        let holds_pose = want.iter().any(|m| {
+            bytes[data.clone()]
+                .windows(m.data.len())
+                .any(|w| w == m.data)
+        });
+        if !holds_pose {
+            bytes[data.start..data.start + 4].copy_from_slice(&[0xff; 4]);
+            broken += 1;
+        }
+    }
+    assert!(
+        broken > 0 && broken < chunks.len(),
+        "{broken} of {}",
+        chunks.len()
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("skip.bag");
+    std::fs::write(&p, &bytes).unwrap();
+    let got = read_all(&mut Bag1::open(&p).unwrap(), &["/pose"]).unwrap();
+    assert_eq!(got, want, "only the chunks with /pose are read");
+    assert!(matches!(
+        read_all(&mut Bag1::open(&p).unwrap(), &["/imu"]),
+        Err(ImportError::Source(SourceError::Corrupt { .. }))
+    ));
+}

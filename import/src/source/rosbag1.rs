@@ -23,7 +23,7 @@
 
 use super::{RawMessage, Source, SourceError, TopicInfo};
 use crate::ros::{normalise_type, Encoding};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -116,9 +116,11 @@ impl Bag1 {
 
     /// Reads every record from the first chunk to the index section in file order, calling `f` on
     /// each message with its topic's running index; `cat` learns the connections met on the way.
+    /// Chunks whose offsets are in `skip` are stepped over without being read or decompressed.
     fn walk<E: From<SourceError>>(
         &self,
         cat: &mut Catalogue,
+        skip: &HashSet<u64>,
         f: &mut dyn FnMut(RawMessage<'_>) -> Result<(), E>,
     ) -> Result<(), E> {
         let mut sc = Scanner::open(&self.path)?;
@@ -127,6 +129,7 @@ impl Bag1 {
         while let Some(rec) = sc.next_record(end)? {
             let fields = Fields::parse(&rec.header, rec.at, &self.path)?;
             match fields.op()? {
+                OP_CHUNK if skip.contains(&rec.at) => sc.skip_data(&rec)?,
                 OP_CHUNK => {
                     let chunk = sc.read_chunk(&rec, &fields)?;
                     walk_chunk(&chunk, &self.path, cat, f)?;
@@ -259,8 +262,31 @@ impl Bag1 {
     /// The topics, by reading every chunk.
     fn topics_by_scan(&self) -> Result<Vec<TopicInfo>, SourceError> {
         let mut cat = Catalogue::default();
-        self.walk::<SourceError>(&mut cat, &mut |_| Ok(()))?;
+        self.walk::<SourceError>(&mut cat, &HashSet::new(), &mut |_| Ok(()))?;
         Ok(cat.topics())
+    }
+
+    /// The catalogue of connections from the index and the offsets of the chunks that hold no
+    /// message of `topics` (the index's chunk infos say which connections each chunk holds).
+    /// `None` when the bag has no usable index: then every chunk is read.
+    fn chunks_without(&self, topics: &[&str]) -> Option<(Catalogue, HashSet<u64>)> {
+        if !self.is_indexed() || topics.is_empty() {
+            return None;
+        }
+        let mut sc = Scanner::open(&self.path).ok()?;
+        let (cat, chunks) = self.read_index(&mut sc).ok()?;
+        let wanted: HashSet<u32> = cat
+            .conns
+            .iter()
+            .filter(|(_, &id)| topics.contains(&cat.topics[id].topic.as_str()))
+            .map(|(&conn, _)| conn)
+            .collect();
+        let skip = chunks
+            .iter()
+            .filter(|c| !c.counts.iter().any(|(conn, _)| wanted.contains(conn)))
+            .map(|c| c.pos)
+            .collect();
+        Some((cat, skip))
     }
 }
 
@@ -279,8 +305,10 @@ impl Source for Bag1 {
         topics: &[&str],
         f: &mut dyn FnMut(RawMessage<'_>) -> Result<(), crate::ImportError>,
     ) -> Result<(), crate::ImportError> {
-        let mut cat = Catalogue::default();
-        self.walk(&mut cat, &mut |m: RawMessage<'_>| {
+        // Chunks holding none of `topics` are skipped: a bag with camera images beside the radar
+        // is read at the speed of its radar and IMU data.
+        let (mut cat, skip) = self.chunks_without(topics).unwrap_or_default();
+        self.walk(&mut cat, &skip, &mut |m: RawMessage<'_>| {
             if topics.is_empty() || topics.contains(&m.topic) {
                 f(m)
             } else {
