@@ -96,6 +96,8 @@ pub struct PointLayout {
     pub doppler_name: String,
     /// The SNR/intensity field's name, if any.
     pub snr_name: Option<String>,
+    /// Bytes of a point the slots need: the end of the furthest slot \[B\].
+    needs: usize,
 }
 
 /// One point: position in the message's axes \[m\], radial velocity \[m/s\], SNR or intensity
@@ -162,12 +164,22 @@ impl PointLayout {
             have: have(),
         })?;
         let snr = find(SNR_NAMES);
+        let doppler = slot(d)?;
+        let snr_slot = snr.map(slot).transpose()?;
+        let needs = xyz
+            .iter()
+            .chain([&doppler])
+            .chain(snr_slot.as_ref())
+            .map(|s| s.offset + datatype::size(s.datatype).unwrap_or(8))
+            .max()
+            .unwrap_or(0);
         Ok(PointLayout {
             xyz,
-            doppler: slot(d)?,
-            snr: snr.map(slot).transpose()?,
+            doppler,
+            snr: snr_slot,
             doppler_name: d.name.clone(),
             snr_name: snr.map(|f| f.name.clone()),
+            needs,
         })
     }
 
@@ -186,16 +198,27 @@ impl PointLayout {
         mut f: impl FnMut(ScanPoint),
     ) -> Result<(), LayoutError> {
         let step = cloud.point_step as usize;
-        let n = cloud.height as usize * cloud.width as usize;
         let row = cloud.row_step as usize;
+        // In u128: height, width and the steps are u32 each, so no product can overflow.
+        let (h, w) = (u128::from(cloud.height), u128::from(cloud.width));
+        let (step128, row128) = (step as u128, row as u128);
+        let n = h * w;
         let need = if cloud.height <= 1 {
-            n * step
+            n * step128
         } else {
-            (cloud.height as usize - 1) * row + cloud.width as usize * step
+            (h - 1) * row128 + w * step128
         };
+        if step < self.needs {
+            return Err(LayoutError::Size {
+                why: format!(
+                    "{step}-byte points, the layout's fields need {} B",
+                    self.needs
+                ),
+            });
+        }
         if step == 0 && n > 0
-            || need > cloud.data.len()
-            || (cloud.height > 1 && row < step * cloud.width as usize)
+            || need > cloud.data.len() as u128
+            || (cloud.height > 1 && row128 < step128 * w)
         {
             return Err(LayoutError::Size {
                 why: format!(
@@ -365,6 +388,18 @@ mod tests {
         let l = PointLayout::new(&f, 16, None).unwrap();
         let mut c = cloud(f, 16, &[vec![0; 16]]);
         c.width = 2;
+        assert!(l.points(&c, |_| {}).is_err());
+        // A later scan with the same fields but shorter points than the layout was made for.
+        c.width = 1;
+        c.point_step = 8;
+        c.row_step = 8;
+        let e = l.points(&c, |_| {}).unwrap_err();
+        assert!(e.to_string().contains("need 16 B"), "{e}");
+        // Sizes whose products overflow 64 bits are refused, not wrapped.
+        c.point_step = 16;
+        c.height = u32::MAX;
+        c.width = u32::MAX;
+        c.row_step = u32::MAX;
         assert!(l.points(&c, |_| {}).is_err());
     }
 }

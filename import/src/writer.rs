@@ -10,8 +10,8 @@
 use crate::calib::Calibration;
 use crate::cloud::{PointLayout, RadarAxes};
 use crate::ros::{
-    FluidPressure, Header, Imu, Odometry, PointCloud2, PoseStamped, Reader, RosMsg, TfMessage,
-    TransformStamped,
+    FluidPressure, Header, Imu, Odometry, PointCloud2, PointField, PoseStamped, Reader, RosMsg,
+    TfMessage, TransformStamped,
 };
 use crate::source::{self, RawMessage, TopicInfo};
 use crate::wire;
@@ -749,7 +749,7 @@ pub fn import(
         Some(a) => a,
         None => detect_axes(sources)?,
     };
-    let mut layouts: BTreeMap<Vec<(String, u32, u8)>, PointLayout> = BTreeMap::new();
+    let mut layouts: Vec<(Vec<PointField>, PointLayout)> = Vec::new();
     let mut radar_q = Reorder::new();
     let mut imu_q = Reorder::new();
     let mut counter: u16 = 0;
@@ -784,22 +784,24 @@ pub fn import(
                         return Ok(());
                     }
                     let c: PointCloud2 = decode(&m, p)?;
-                    let key: Vec<(String, u32, u8)> = c
-                        .fields
-                        .iter()
-                        .map(|f| (f.name.clone(), f.offset, f.datatype))
-                        .collect();
-                    if !layouts.contains_key(&key) {
-                        let l = PointLayout::of(&c, opts.doppler_field.as_deref()).map_err(
-                            |error| ImportError::Layout {
-                                at: at(p, &m),
-                                error,
-                            },
-                        )?;
-                        radar_notes.push(layout_note(&l, axes));
-                        layouts.insert(key.clone(), l);
-                    }
-                    let l = &layouts[&key];
+                    // Scans almost always share one layout: found by comparing fields, no
+                    // key built per scan.
+                    let known = layouts.iter().position(|(f, _)| *f == c.fields);
+                    let li = match known {
+                        Some(li) => li,
+                        None => {
+                            let l = PointLayout::of(&c, opts.doppler_field.as_deref()).map_err(
+                                |error| ImportError::Layout {
+                                    at: at(p, &m),
+                                    error,
+                                },
+                            )?;
+                            radar_notes.push(layout_note(&l, axes));
+                            layouts.push((c.fields.clone(), l));
+                            layouts.len() - 1
+                        }
+                    };
+                    let l = &layouts[li].1;
                     let (pts, snr) =
                         scan_points(l, &c, axes, tally).map_err(|error| ImportError::Layout {
                             at: at(p, &m),
