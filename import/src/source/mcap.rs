@@ -259,6 +259,9 @@ impl McapFile {
                     if past_data_end || !matches!(opcode, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
                         continue;
                     }
+                    // The mcap crate sizes strings and maps by their length prefixes before
+                    // reading them: a corrupt prefix must not become a 4 GiB allocation.
+                    check_prefixes(opcode, data).map_err(|why| self.corrupt(fed, why))?;
                     let record =
                         mcap::parse_record(opcode, data).map_err(|e| self.mcap_err(fed, &e))?;
                     match record {
@@ -539,5 +542,74 @@ impl Source for McapFile {
                 })
             },
         )
+    }
+}
+
+/// Checks that every length prefix of a schema or channel record fits the record: schema `u16 id,
+/// string name, string encoding`; channel `u16 id, u16 schema id, string topic, string message
+/// encoding, map metadata` (a string or map is `u32 len` + that many bytes). The schema's data
+/// length the crate checks itself; message records have no prefix before their data.
+fn check_prefixes(opcode: u8, body: &[u8]) -> Result<(), String> {
+    let (what, fixed, prefixed): (&str, usize, &[&str]) = match opcode {
+        op::SCHEMA => ("schema", 2, &["name", "encoding"]),
+        op::CHANNEL => ("channel", 4, &["topic", "message encoding", "metadata"]),
+        _ => return Ok(()),
+    };
+    let cut = |at: usize, n: u64, field: &str| {
+        format!(
+            "{what} record: its {field} needs {n} B at byte {at}, the record has {} B",
+            body.len()
+        )
+    };
+    if body.len() < fixed {
+        return Err(cut(0, fixed as u64, "ids"));
+    }
+    let mut at = fixed;
+    for field in prefixed {
+        let len = body
+            .get(at..at + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .ok_or_else(|| cut(at, 4, &format!("{field} length")))?;
+        if u64::from(len) > (body.len() - at - 4) as u64 {
+            return Err(cut(at + 4, u64::from(len), field));
+        }
+        at += 4 + len as usize;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn length_prefixes_beyond_the_record_are_refused() {
+        // A channel: id 1, schema 0, topic "/a", encoding "cdr", empty metadata.
+        let mut ok = vec![1, 0, 0, 0];
+        for s in ["/a", "cdr"] {
+            ok.extend((s.len() as u32).to_le_bytes());
+            ok.extend(s.as_bytes());
+        }
+        ok.extend(0u32.to_le_bytes());
+        assert_eq!(check_prefixes(op::CHANNEL, &ok), Ok(()));
+        let mut bad = ok.clone();
+        bad[4..8].copy_from_slice(&0xfb00_0000u32.to_le_bytes());
+        let e = check_prefixes(op::CHANNEL, &bad).unwrap_err();
+        assert!(e.contains("channel record: its topic needs 4211081216 B"), "{e}");
+        assert!(check_prefixes(op::CHANNEL, &ok[..ok.len() - 2]).is_err());
+        assert!(check_prefixes(op::SCHEMA, &[1]).is_err());
+    }
+
+    #[test]
+    fn a_fuzzer_found_input_is_an_error_not_a_4_gib_allocation() {
+        // After the magic: a channel record (0x04) whose topic claims 0xff56f9fb bytes.
+        let tail = b"\x04\x12\0\0\0\0\0\0\0\x04\0\0\0\0\0\0\xfb\xf9V\xff\0\0\0\x12\0\0\0\0\0\0";
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("f.mcap");
+        let mut bytes = b"\x89MCAP0\r\n".to_vec();
+        bytes.extend(tail);
+        std::fs::write(&p, bytes).unwrap();
+        let r = McapFile::open(&p).and_then(|mut f| f.topics());
+        assert!(matches!(r, Err(SourceError::Corrupt { .. })), "{r:?}");
     }
 }
