@@ -255,3 +255,199 @@ fn assert_same_streams(a: &Path, b: &Path, name: &str) {
         assert_eq!((a.1, a.2), (b.1, b.2), "{name}: sample {k} values");
     }
 }
+
+/// Reads a pty the replay opened until it closes (or 20 s pass).
+#[cfg(unix)]
+fn drain(path: &str) -> std::thread::JoinHandle<Vec<u8>> {
+    use std::io::Read;
+    let mut port = serialport::new(path, 921_600)
+        .timeout(std::time::Duration::from_millis(20))
+        .open()
+        .unwrap();
+    std::thread::spawn(move || {
+        let mut out = Vec::new();
+        let mut buf = [0u8; 4096];
+        let start = std::time::Instant::now();
+        while start.elapsed() < std::time::Duration::from_secs(20) {
+            match port.read(&mut buf) {
+                Ok(n) if n > 0 => out.extend_from_slice(&buf[..n]),
+                Ok(_) => break,
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+                Err(_) => break, // the replay closed the pty
+            }
+        }
+        out
+    })
+}
+
+/// Every command a user runs on a session works on an imported one: `odometry` and `run
+/// --session` (same trajectory), `eval`, `plot`, `dataset build`, `export-mcap` (whose import
+/// is the same session again) and `replay` into ptys (the session's bytes, in order).
+#[test]
+#[cfg(unix)]
+fn every_command_works_on_an_imported_session() {
+    use std::io::BufRead;
+    let d = tempfile::tempdir().unwrap();
+    let w = d.path();
+    let p = |n: &str| -> String { w.join(n).to_str().unwrap().to_string() };
+    milliego(&[
+        "sim",
+        "--family",
+        "office",
+        "--motion",
+        "handheld",
+        "--seed",
+        "5",
+        "--duration",
+        "10",
+        "-o",
+        &p("orig"),
+    ]);
+    milliego(&["export-mcap", &p("orig"), "-o", &p("s.mcap")]);
+    milliego(&["import", &p("s.mcap"), "-o", &p("imp")]);
+    let imp = w.join("imp");
+    let meta = std::fs::read_to_string(imp.join("session.toml")).unwrap();
+    assert!(
+        meta.contains("[import]"),
+        "an imported session says so:\n{meta}"
+    );
+
+    // The export carried the extrinsics (/tf_static) and the .cfg (its `milliego` metadata).
+    let (m0, m1) = (
+        milliego_session::Session::open(&w.join("orig"))
+            .unwrap()
+            .meta,
+        milliego_session::Session::open(&imp).unwrap().meta,
+    );
+    assert_eq!(
+        m0.extrinsics, m1.extrinsics,
+        "extrinsics through /tf_static"
+    );
+    assert!(
+        imp.join("radar.cfg").is_file(),
+        "the .cfg through the metadata"
+    );
+
+    // odometry and run --session on the imported session are as accurate as on the original.
+    let ate_of = |est: &str, session: &str| -> f64 {
+        let gt = w.join(session).join("groundtruth.tum");
+        let j: serde_json::Value = serde_json::from_str(&milliego(&[
+            "eval",
+            "--est",
+            &p(est),
+            "--gt",
+            gt.to_str().unwrap(),
+            "--json",
+        ]))
+        .unwrap();
+        j["ate_m"]["rmse"].as_f64().unwrap()
+    };
+    for session in ["orig", "imp"] {
+        milliego(&[
+            "odometry",
+            "--session",
+            &p(session),
+            "-o",
+            &p(&format!("odo-{session}.tum")),
+        ]);
+        milliego(&[
+            "run",
+            "--session",
+            &p(session),
+            "--estimator",
+            "doppler",
+            "--out",
+            &format!("tum:{}", p(&format!("run-{session}.tum"))),
+        ]);
+    }
+    for tool in ["odo", "run"] {
+        let (a0, a1) = (
+            ate_of(&format!("{tool}-orig.tum"), "orig"),
+            ate_of(&format!("{tool}-imp.tum"), "imp"),
+        );
+        println!("{tool}: ATE {a1:.4} m imported, {a0:.4} m original");
+        assert!(
+            a1.is_finite() && (a1 - a0).abs() <= 0.05 * a0,
+            "{tool}: {a1} m vs {a0} m"
+        );
+    }
+    let gt = imp.join("groundtruth.tum");
+
+    milliego(&[
+        "plot",
+        "trajectory",
+        "--est",
+        &p("odo-imp.tum"),
+        "--gt",
+        gt.to_str().unwrap(),
+        "--out",
+        &p("fig"),
+    ]);
+    assert!(
+        std::fs::metadata(w.join("fig/trajectory.png"))
+            .unwrap()
+            .len()
+            > 1000
+    );
+    milliego(&["plot", "radar", &p("imp"), "-o", &p("frame.png")]);
+    assert!(std::fs::metadata(w.join("frame.png")).unwrap().len() > 1000);
+
+    // Training data from the imported session: the same windows as from the original.
+    let windows = |session: &str, out: &str| -> u64 {
+        milliego(&["dataset", "build", &p(session), "-o", &p(out), "--quiet"]);
+        let m: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(w.join(out).join("manifest.json")).unwrap(),
+        )
+        .unwrap();
+        m["windows"].as_u64().unwrap()
+    };
+    let n = windows("imp", "ds-imp");
+    assert!(n > 20, "{n} windows");
+    assert_eq!(
+        n,
+        windows("orig", "ds-orig"),
+        "windows from the imported and the original session"
+    );
+
+    // export-mcap of the imported session imports to the same streams again.
+    milliego(&["export-mcap", &p("imp"), "-o", &p("again.mcap")]);
+    milliego(&["import", &p("again.mcap"), "-o", &p("again")]);
+    assert_same_streams(&imp, &w.join("again"), "import(export(import))");
+
+    // replay into ptys: the session's radar and IMU bytes come out, in order.
+    let mut child = Command::new(BIN)
+        .args([
+            "replay",
+            &p("imp"),
+            "--fast",
+            "--wait-open",
+            "--linger",
+            "0.5",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+    let mut port = |name: &str| -> String {
+        let l = lines.next().unwrap().unwrap();
+        l.strip_prefix(&format!("{name}: ")).expect(&l).to_string()
+    };
+    let (radar, imu) = (port("radar"), port("imu"));
+    let (r, i) = (drain(&radar), drain(&imu));
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let s = milliego_session::Session::open(&imp).unwrap();
+    assert!(
+        r.join().unwrap() == s.radar.unwrap().read_all().unwrap(),
+        "radar bytes"
+    );
+    assert!(
+        i.join().unwrap() == s.imu.unwrap().read_all().unwrap(),
+        "IMU bytes"
+    );
+}

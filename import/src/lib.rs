@@ -11,6 +11,7 @@ pub mod calib;
 pub mod cloud;
 pub mod ros;
 pub mod source;
+pub mod tf;
 pub mod wire;
 pub mod writer;
 

@@ -14,6 +14,7 @@ use crate::ros::{
     TfMessage, TransformStamped,
 };
 use crate::source::{self, RawMessage, TopicInfo};
+use crate::tf::StaticTf;
 use crate::wire;
 use crate::ImportError;
 use milliego_session::{
@@ -336,7 +337,16 @@ struct Survey {
     truth: Vec<TruthPose>,
     tallies: BTreeMap<Kind, Tally>,
     imu_bytes: usize,
+    /// `/tf_static` (read only without a calibration file).
+    static_tf: StaticTf,
+    /// The frame ids of the first radar scan, IMU sample and ground-truth child.
+    radar_frame: Option<String>,
+    imu_frame: Option<String>,
+    truth_child: Option<String>,
 }
+
+/// The topic whose static transforms give the extrinsics when no calibration file does.
+const TF_STATIC: &str = "/tf_static";
 
 fn survey(
     sources: &[PathBuf],
@@ -356,11 +366,18 @@ fn survey(
     }
     let by_topic: BTreeMap<&str, Kind> =
         chosen.iter().map(|(k, t)| (t.topic.as_str(), *k)).collect();
-    let names: Vec<&str> = by_topic.keys().copied().collect();
+    let mut names: Vec<&str> = by_topic.keys().copied().collect();
+    if opts.calib.is_none() && !by_topic.contains_key(TF_STATIC) {
+        names.push(TF_STATIC);
+    }
     let calib = opts.calib.clone().unwrap_or_default();
     for p in sources {
         let mut src = source::open(p)?;
         src.for_each(&names, &mut |m| {
+            if m.topic == TF_STATIC && opts.calib.is_none() && m.msg_type == TfMessage::TYPE {
+                let tf: TfMessage = decode(&m, p)?;
+                tf.transforms.iter().for_each(|x| s.static_tf.add(x));
+            }
             let Some(&kind) = by_topic.get(m.topic) else {
                 return Ok(());
             };
@@ -373,6 +390,7 @@ fn survey(
                 Kind::Radar => {
                     let h = header_of(&m, p)?;
                     check_frame(calib.radar_frame_id.as_ref(), &h, &m, p)?;
+                    s.radar_frame.get_or_insert_with(|| h.frame_id.clone());
                     tally.zero_stamps += u64::from(h.stamp_ns == 0);
                     s.scans.push(ScanHead {
                         seq: h.seq,
@@ -385,6 +403,7 @@ fn survey(
                     let h = header_of(&m, p)?;
                     if kind == Kind::Imu {
                         check_frame(calib.imu_frame_id.as_ref(), &h, &m, p)?;
+                        s.imu_frame.get_or_insert_with(|| h.frame_id.clone());
                     }
                     tally.zero_stamps += u64::from(h.stamp_ns == 0);
                     tally.seen(stamp_or_log(&h, &m));
@@ -396,6 +415,9 @@ fn survey(
                     s.triggers.push((seq, stamp_or_log(&h, &m)));
                 }
                 Kind::Truth => {
+                    if s.truth_child.is_none() {
+                        s.truth_child = truth_child(&m, p, opts.gt_child_frame.as_deref())?;
+                    }
                     for (t, pos, q) in truth_poses(&m, p, opts.gt_child_frame.as_deref())? {
                         tally.seen(t);
                         s.truth.push((t, pos, q));
@@ -406,6 +428,25 @@ fn survey(
         })?;
     }
     Ok(s)
+}
+
+/// The frame a ground-truth message gives the pose of (the body), when it says.
+fn truth_child(
+    m: &RawMessage<'_>,
+    src: &Path,
+    named: Option<&str>,
+) -> Result<Option<String>, ImportError> {
+    if let Some(n) = named {
+        return Ok(Some(n.into()));
+    }
+    Ok(match m.msg_type {
+        t if t == Odometry::TYPE => Some(decode::<Odometry>(m, src)?.child_frame_id),
+        t if t == TransformStamped::TYPE => {
+            Some(decode::<TransformStamped>(m, src)?.child_frame_id)
+        }
+        _ => None,
+    }
+    .filter(|c| !c.is_empty()))
 }
 
 /// The body poses in one ground-truth message: `(stamp ns, position, [x, y, z, w])`.
@@ -647,7 +688,13 @@ pub fn import(
     // The readers take half the active chirping off a frame's ready time when the session has
     // a .cfg, so frames are stamped that much later here.
     let mut half_chirps_s = 0.0;
-    if let Some(text) = &opts.radar_cfg {
+    // The sources' own `milliego` metadata (our export-mcap writes it): radar axes and .cfg.
+    let ours = milliego_metadata(sources)?;
+    let radar_cfg = opts
+        .radar_cfg
+        .clone()
+        .or_else(|| ours.get("radar_cfg").cloned());
+    if let Some(text) = &radar_cfg {
         let d = radar_driver::cfg::RadarConfig::parse(text)
             .and_then(|c| c.derive(None))
             .map_err(ImportError::RadarCfg)?;
@@ -655,6 +702,16 @@ pub fn import(
         calib.radar_frame_s = calib.radar_frame_s.or(Some(d.active_frame_time_ms / 1e3));
     }
     let mut s = survey(sources, &chosen, opts)?;
+    let axes = match opts.radar_axes {
+        Some(a) => a,
+        None if ours.get("radar_axes").map(String::as_str) == Some("ti") => RadarAxes::Session,
+        None => RadarAxes::Ros,
+    };
+    let calib_note = if opts.calib.is_some() {
+        None
+    } else {
+        Some(extrinsics_from_tf(&s, axes, &mut calib))
+    };
     let mut radar_tally = s.tallies.remove(&Kind::Radar);
     let scan_times = radar_tally
         .as_mut()
@@ -732,7 +789,7 @@ pub fn import(
         });
     }
     let mut w = SessionWriter::create(out, meta).map_err(ImportError::Session)?;
-    if let Some(text) = &opts.radar_cfg {
+    if let Some(text) = &radar_cfg {
         w.radar_cfg(text).map_err(ImportError::Session)?;
     }
     let mut radar_w = match chosen.contains_key(&Kind::Radar) {
@@ -745,10 +802,6 @@ pub fn import(
     };
 
     // Second pass: the sensor streams.
-    let axes = match opts.radar_axes {
-        Some(a) => a,
-        None => detect_axes(sources)?,
-    };
     let mut layouts: Vec<(Vec<PointField>, PointLayout)> = Vec::new();
     let mut radar_q = Reorder::new();
     let mut imu_q = Reorder::new();
@@ -899,6 +952,10 @@ pub fn import(
         .collect();
     if let Some(gt) = tallies.get_mut(&Kind::Truth) {
         gt.written = poses.len() as u64;
+        gt.drop_n(
+            "pose outside the sensor streams / --start/--duration",
+            (s.truth.len() - poses.len()) as u64,
+        );
         if !poses.is_empty() {
             w.groundtruth(&poses).map_err(ImportError::Session)?;
         }
@@ -911,11 +968,7 @@ pub fn import(
     if let Some(mut t) = radar_tally {
         t.written = radar_written;
         t.notes.extend(radar_notes);
-        if opts.calib.is_none() {
-            t.notes.push(
-                "no calibration: radar and IMU at the body origin, radar boresight = body x".into(),
-            );
-        }
+        t.notes.extend(calib_note);
         streams.push(t.into_meta("radar"));
     }
     for (k, t) in tallies {
@@ -933,15 +986,53 @@ pub fn import(
 
 /// The radar axes a recording declares: `milliego export-mcap` records `radar_axes = "ti"` in its
 /// `milliego` metadata; anything else is taken to follow ROS (x forward).
-fn detect_axes(sources: &[PathBuf]) -> Result<RadarAxes, ImportError> {
+/// Without a calibration file: the extrinsics from `/tf_static` when it connects the radar and
+/// IMU frames, else identity. Returns what the import says about it.
+fn extrinsics_from_tf(s: &Survey, axes: RadarAxes, calib: &mut Calibration) -> String {
+    let identity = "radar and IMU at the body origin, radar boresight = body x";
+    if s.static_tf.is_empty() {
+        return format!("no calibration (--calib) and no {TF_STATIC}: {identity}");
+    }
+    let (radar, imu) = (s.radar_frame.as_deref(), s.imu_frame.as_deref());
+    let Some(rig) = s.static_tf.rig(s.truth_child.as_deref(), radar, imu) else {
+        return format!(
+            "no calibration (--calib), and {TF_STATIC} does not connect the radar frame `{}` and \
+             the IMU frame `{}`: {identity}",
+            radar.unwrap_or(""),
+            imu.unwrap_or("")
+        );
+    };
+    let mut used = Vec::new();
+    if let Some(r) = rig.radar {
+        calib.radar = match axes {
+            RadarAxes::Ros => crate::calib::radar_from_ros(r.translation_m, r.rotation_wxyz),
+            RadarAxes::Session => r,
+        };
+        used.push(format!("radar `{}`", radar.unwrap_or("")));
+    }
+    if let Some(i) = rig.imu {
+        calib.imu = i;
+        used.push(format!("IMU `{}`", imu.unwrap_or("")));
+    }
+    format!(
+        "extrinsics from {TF_STATIC}: {} in body frame `{}`",
+        used.join(" and "),
+        rig.body
+    )
+}
+
+/// The first `milliego` metadata record of the sources (empty when none has one).
+fn milliego_metadata(sources: &[PathBuf]) -> Result<BTreeMap<String, String>, ImportError> {
     for p in sources {
-        for (name, kv) in source::open(p)?.metadata()? {
-            if name == "milliego" && kv.get("radar_axes").map(String::as_str) == Some("ti") {
-                return Ok(RadarAxes::Session);
-            }
+        if let Some((_, kv)) = source::open(p)?
+            .metadata()?
+            .into_iter()
+            .find(|(name, _)| name == "milliego")
+        {
+            return Ok(kv.into_iter().collect());
         }
     }
-    Ok(RadarAxes::Ros)
+    Ok(BTreeMap::new())
 }
 
 /// Writes one chunk whose data was measured at `t_s`: the host stamp is when its last byte would

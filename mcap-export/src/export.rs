@@ -535,20 +535,25 @@ pub fn export(
         range = Some(range.map_or((stamp, stamp), |(a, _): (u64, u64)| (a, stamp)));
     }
     let offset_s = format!("{shift_s}");
+    let mut ours = BTreeMap::from([
+        ("session".into(), session.dir.display().to_string()),
+        (
+            "time_base".into(),
+            "session host clock [s] * 1e9 + time_offset_ns".into(),
+        ),
+        ("time_offset_ns".into(), ns(shift_s).to_string()),
+        ("time_offset_s".into(), offset_s),
+        ("clock_unsynced".into(), clock.unsynced().to_string()),
+        // /radar/points are in the session's radar axes, not ROS's (milliego import reads this).
+        ("radar_axes".into(), RADAR_AXES.into()),
+    ]);
+    // The chirp configuration the radar ran: Doppler resolution and exposure for the estimators.
+    if let Some(cfg) = session.radar_cfg()? {
+        ours.insert("radar_cfg".into(), cfg);
+    }
     w.write_metadata(&Metadata {
         name: "milliego".into(),
-        metadata: BTreeMap::from([
-            ("session".into(), session.dir.display().to_string()),
-            (
-                "time_base".into(),
-                "session host clock [s] * 1e9 + time_offset_ns".into(),
-            ),
-            ("time_offset_ns".into(), ns(shift_s).to_string()),
-            ("time_offset_s".into(), offset_s),
-            ("clock_unsynced".into(), clock.unsynced().to_string()),
-            // /radar/points are in the session's radar axes, not ROS's (milliego import reads this).
-            ("radar_axes".into(), RADAR_AXES.into()),
-        ]),
+        metadata: ours,
     })
     .map_err(mcap_err)?;
     w.finish().map_err(mcap_err)?;
