@@ -306,6 +306,37 @@ fn every_command_works_on_an_imported_session() {
     milliego(&["export-mcap", &p("orig"), "-o", &p("s.mcap")]);
     milliego(&["import", &p("s.mcap"), "-o", &p("imp")]);
     let imp = w.join("imp");
+    // Bad input at the command line: a non-zero exit and the error on stderr, naming it.
+    for (args, want) in [
+        (
+            vec![
+                "import",
+                &p("s.mcap"),
+                "--imu-topic",
+                "/nope",
+                "-o",
+                &p("x"),
+            ][..]
+                .to_vec(),
+            "imu topic: topic /nope is not in the recording",
+        ),
+        (
+            vec!["import", &p("missing.bag"), "-o", &p("x")],
+            "missing.bag",
+        ),
+        (
+            vec!["import", &p("orig/session.toml"), "-o", &p("x")],
+            "session.toml",
+        ),
+    ] {
+        let out = Command::new(BIN).args(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains(want),
+            "{args:?}: {err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+    }
     let meta = std::fs::read_to_string(imp.join("session.toml")).unwrap();
     assert!(
         meta.contains("[import]"),

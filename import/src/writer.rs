@@ -249,6 +249,14 @@ impl Tally {
     fn drop(&mut self, why: &str) {
         self.drop_n(why, 1);
     }
+    /// Drops one message for `why`; the first of each reason is named in the notes.
+    fn drop_at(&mut self, why: &str, src: &Path, m: &RawMessage<'_>) {
+        if !self.dropped.contains_key(why) {
+            self.notes
+                .push(format!("first dropped ({why}): {}", at(src, m)));
+        }
+        self.drop(why);
+    }
     fn drop_n(&mut self, why: &str, n: u64) {
         if n > 0 {
             *self.dropped.entry(why.into()).or_default() += n;
@@ -553,6 +561,9 @@ struct Reorder {
     /// Time of the last item written \[ns\].
     last: Option<i64>,
 }
+
+/// Why a message stamped before one already written is dropped.
+const BACKWARDS: &str = "stamp more than 2 s before one already written";
 
 /// How long items wait for earlier ones \[ns\].
 const REORDER_NS: i64 = 2_000_000_000;
@@ -868,7 +879,7 @@ pub fn import(
                         l.snr_name.as_ref().map(|_| snr.as_slice()),
                     );
                     if !radar_q.push(t, bytes) {
-                        tally.drop("time went backwards");
+                        tally.drop_at(BACKWARDS, p, &m);
                     }
                     let rw = radar_w.as_mut().expect("radar stream");
                     radar_q.pop_ready(Some(t), |t, b| {
@@ -886,7 +897,7 @@ pub fn import(
                             .chain(&u.linear_acceleration)
                             .any(|v| !v.is_finite())
                         {
-                            tally.drop("not finite");
+                            tally.drop_at("not finite", p, &m);
                             return Ok(());
                         }
                         (
@@ -902,7 +913,7 @@ pub fn import(
                         let b: FluidPressure = decode(&m, p)?;
                         let t = stamp_or_log(&b.header, &m);
                         if !b.fluid_pressure.is_finite() {
-                            tally.drop("not finite");
+                            tally.drop_at("not finite", p, &m);
                             return Ok(());
                         }
                         (
@@ -916,7 +927,7 @@ pub fn import(
                     }
                     counter = counter.wrapping_add(1);
                     if !imu_q.push(t, bytes) {
-                        tally.drop("time went backwards");
+                        tally.drop_at(BACKWARDS, p, &m);
                         return Ok(());
                     }
                     tally.written += 1;

@@ -595,7 +595,10 @@ mod tests {
         let mut bad = ok.clone();
         bad[4..8].copy_from_slice(&0xfb00_0000u32.to_le_bytes());
         let e = check_prefixes(op::CHANNEL, &bad).unwrap_err();
-        assert!(e.contains("channel record: its topic needs 4211081216 B"), "{e}");
+        assert!(
+            e.contains("channel record: its topic needs 4211081216 B"),
+            "{e}"
+        );
         assert!(check_prefixes(op::CHANNEL, &ok[..ok.len() - 2]).is_err());
         assert!(check_prefixes(op::SCHEMA, &[1]).is_err());
     }
