@@ -465,6 +465,7 @@ impl McapFile {
                     if opcode != op::METADATA {
                         continue;
                     }
+                    check_prefixes(opcode, data).map_err(|why| self.corrupt(fed, why))?;
                     if let Record::Metadata(m) =
                         mcap::parse_record(opcode, data).map_err(|e| self.mcap_err(fed, &e))?
                     {
@@ -553,6 +554,7 @@ fn check_prefixes(opcode: u8, body: &[u8]) -> Result<(), String> {
     let (what, fixed, prefixed): (&str, usize, &[&str]) = match opcode {
         op::SCHEMA => ("schema", 2, &["name", "encoding"]),
         op::CHANNEL => ("channel", 4, &["topic", "message encoding", "metadata"]),
+        op::METADATA => ("metadata", 0, &["name", "metadata"]),
         _ => return Ok(()),
     };
     let cut = |at: usize, n: u64, field: &str| {
