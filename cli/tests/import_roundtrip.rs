@@ -41,6 +41,24 @@ fn ros_python() -> Option<String> {
     Some(py)
 }
 
+/// A simulated session of `family` and `motion` at `out`.
+fn sim(family: &str, motion: &str, seed: u32, duration_s: u32, out: &str) {
+    let (seed, duration) = (seed.to_string(), duration_s.to_string());
+    milliego(&[
+        "sim",
+        "--family",
+        family,
+        "--motion",
+        motion,
+        "--seed",
+        &seed,
+        "--duration",
+        &duration,
+        "-o",
+        out,
+    ]);
+}
+
 /// ATE RMSE [m] of `milliego odometry` on a session against the session's ground truth.
 fn ate(session: &Path, work: &Path, name: &str) -> f64 {
     let est = work.join(format!("{name}.tum"));
@@ -67,19 +85,7 @@ fn imported_bags_reproduce_the_original_accuracy() {
     let p = |n: &str| -> PathBuf { w.join(n) };
     let s = |x: &PathBuf| x.to_str().unwrap().to_string();
     let orig = p("orig");
-    milliego(&[
-        "sim",
-        "--family",
-        "office",
-        "--motion",
-        "handheld",
-        "--seed",
-        "11",
-        "--duration",
-        "20",
-        "-o",
-        &s(&orig),
-    ]);
+    sim("office", "handheld", 11, 20, &s(&orig));
     milliego(&["export-mcap", &s(&orig), "-o", &s(&p("s.mcap"))]);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../import/tests/py/bags_from_mcap.py");
     let out = Command::new(&py)
@@ -203,19 +209,7 @@ fn import_of_the_export_is_the_session() {
     let w = d.path();
     let orig = w.join("orig");
     let o = orig.to_str().unwrap();
-    milliego(&[
-        "sim",
-        "--family",
-        "corridor",
-        "--motion",
-        "robot",
-        "--seed",
-        "3",
-        "--duration",
-        "8",
-        "-o",
-        o,
-    ]);
+    sim("corridor", "robot", 3, 8, o);
     let mcap = w.join("s.mcap");
     milliego(&["export-mcap", o, "-o", mcap.to_str().unwrap()]);
     let back = w.join("back");
@@ -290,19 +284,7 @@ fn every_command_works_on_an_imported_session() {
     let d = tempfile::tempdir().unwrap();
     let w = d.path();
     let p = |n: &str| -> String { w.join(n).to_str().unwrap().to_string() };
-    milliego(&[
-        "sim",
-        "--family",
-        "office",
-        "--motion",
-        "handheld",
-        "--seed",
-        "5",
-        "--duration",
-        "10",
-        "-o",
-        &p("orig"),
-    ]);
+    sim("office", "handheld", 5, 10, &p("orig"));
     milliego(&["export-mcap", &p("orig"), "-o", &p("s.mcap")]);
     milliego(&["import", &p("s.mcap"), "-o", &p("imp")]);
     let imp = w.join("imp");
