@@ -327,7 +327,7 @@ fn every_command_works_on_an_imported_session() {
 
     // The export carried the extrinsics (/tf_static) and the .cfg (its `milliego` metadata).
     let (m0, m1) = (
-        milliego_session::Session::open(&w.join("orig"))
+        milliego_session::Session::open(w.join("orig"))
             .unwrap()
             .meta,
         milliego_session::Session::open(&imp).unwrap().meta,
