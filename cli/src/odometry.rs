@@ -58,7 +58,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
             "session": a.session.display().to_string(), "estimator": format!("{:?}", a.estimator).to_lowercase(),
             "poses": r.trajectory.len(), "radar_frames": r.radar_frames, "imu_samples": r.imu_samples,
             "ego_velocity": {"ok": r.ego_ok, "degenerate": r.ego_degenerate, "too_few_points": r.ego_too_few, "no_consensus": r.ego_no_consensus},
-            "filter": {"updates": r.updates, "gated": r.gated},
+            "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates},
             "radar_stream": {"frames_bad": r.radar.bad, "bytes_skipped": r.radar.bytes_skipped},
             "imu_stream": {"frames_bad": r.imu.bad, "bytes_skipped": r.imu.bytes_skipped, "not_samples": r.imu.not_samples},
             "clock_unsynced": r.clock_unsynced,

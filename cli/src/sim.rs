@@ -63,6 +63,12 @@ struct RunArgs {
     /// IMU UART rate [bit/s].
     #[arg(long, default_value_t = 921_600)]
     imu_baud: u32,
+    /// Seconds at rest before the motion starts (it then ramps up over 1.5 s).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    rest_start: f64,
+    /// Seconds at rest at the end (the motion ramps down over 1.5 s before).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    rest_end: f64,
 }
 
 #[derive(Debug, Args)]
@@ -94,6 +100,8 @@ pub fn run(args: SimArgs) -> Result<()> {
             sc.radar_hz = r.radar_hz;
             sc.imu_hz = r.imu_hz;
             sc.imu_baud = r.imu_baud;
+            sc.rest_start_s = r.rest_start;
+            sc.rest_end_s = r.rest_end;
             let s = simulate(&sc, &out, "")?;
             println!("{}", summary_line(&out, &s));
             Ok(())

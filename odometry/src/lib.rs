@@ -6,6 +6,8 @@
 //!   covariance, and degenerate geometry reported rather than silently wrong.
 //! * [`rio`]: the error-state Kalman filter that fuses both (IMU propagation, radar velocity
 //!   updates, bias estimation, chi-square gating).
+//! * [`rest`]: rest detection from the IMU and the radar's Doppler together, and the zero-velocity
+//!   / zero-rate updates taken at rest.
 //! * [`runner`]: the streaming loop over both (levelling, priors, the health rule, updates, IMU
 //!   gaps), one IMU sample or radar frame at a time; the offline runner ([`offline`]) and the
 //!   runtime's classical estimators are loops over it.
@@ -16,6 +18,7 @@
 
 pub mod ego_velocity;
 pub mod offline;
+pub mod rest;
 pub mod rio;
 pub mod runner;
 pub mod strapdown;

@@ -4,6 +4,7 @@
 //! truth. The loop itself is [`crate::runner::Runner`], the one the on-device runtime runs.
 
 use crate::ego_velocity::Config as EgoConfig;
+use crate::rest::RestConfig;
 use crate::rio::RioConfig;
 use crate::runner::{ClassicalConfig, FrameInput, Mounting, Runner};
 use crate::strapdown::ImuSample;
@@ -34,6 +35,8 @@ pub struct OfflineConfig {
     /// covariance ignores direction errors (angular resolution) and ghost points that slip into
     /// the consensus of a sparse frame.
     pub velocity_cov_scale: f64,
+    /// Rest detection and the updates at rest.
+    pub rest: RestConfig,
 }
 
 impl Default for OfflineConfig {
@@ -46,6 +49,7 @@ impl Default for OfflineConfig {
             ego: c.ego,
             level_window_s: c.level_window_s,
             velocity_cov_scale: c.velocity_cov_scale,
+            rest: c.rest,
         }
     }
 }
@@ -73,6 +77,10 @@ pub struct OfflineResult {
     pub updates: u64,
     /// Filter updates rejected by the gate.
     pub gated: u64,
+    /// IMU samples at which the body was at rest ([`crate::rest`]).
+    pub rest_samples: u64,
+    /// Zero-velocity and zero-rate updates applied at rest.
+    pub rest_updates: u64,
     /// IMU samples integrated.
     pub imu_samples: usize,
     /// Sensor-to-host clock maps (None when the session has no timing index).
@@ -134,6 +142,7 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
             ego: cfg.ego,
             level_window_s: cfg.level_window_s,
             velocity_cov_scale: cfg.velocity_cov_scale,
+            rest: cfg.rest,
             // The filter runs in the IMU frame, placed by the session's extrinsics.
             mounting: Mounting::from_session(&session.meta.extrinsics),
             // Offline, both streams are complete: no radar-only dead reckoning.
@@ -193,6 +202,8 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
         ego_no_consensus: n(c.ego_no_consensus),
         updates: filter.updates,
         gated: filter.gated,
+        rest_samples: c.rest_samples,
+        rest_updates: filter.rest_updates,
         imu_samples: imu.len(),
         radar_clock,
         imu_clock,

@@ -112,6 +112,8 @@ pub struct RioCounters {
     /// Times the filter re-anchored its velocity after a run of gated measurements (it had
     /// diverged or the motion changed faster than the model allows).
     pub reanchors: u64,
+    /// Zero-velocity and zero-rate pseudo-measurements applied at rest ([`crate::rest`]).
+    pub rest_updates: u64,
 }
 
 /// The filter.
@@ -298,7 +300,6 @@ impl Rio {
     }
 
     fn update_gated(&mut self, m: &VelocityMeasurement, gate: bool) {
-        let st = *self.nav.state();
         let (pred, h) = self.radar_model();
         let rm = Matrix3::from_fn(|i, j| m.covariance[i][j]);
         let y = Vector3::from(m.velocity) - pred;
@@ -333,18 +334,65 @@ impl Rio {
             return self.update_gated(m, false);
         }
         self.gated_run = 0;
+        self.correct(&y, &h, &rm, &si);
+        self.counters.updates += 1;
+    }
+
+    /// Zero-velocity pseudo-measurement: the body is at rest, its world velocity zero with
+    /// standard deviation `std` \[m/s\] per axis (see [`crate::rest`]).
+    pub fn zero_velocity(&mut self, std: f64) {
+        let mut h = M3x15::zeros();
+        h.fixed_view_mut::<3, 3>(0, 3)
+            .copy_from(&Matrix3::identity());
+        let y = -self.nav.state().v;
+        self.pseudo(&y, &h, std);
+    }
+
+    /// Position-hold pseudo-measurement: at rest the position is `anchor` \[m\] (where the rest
+    /// began) with standard deviation `std` \[m\] per axis.
+    pub fn hold_position(&mut self, anchor: Vector3<f64>, std: f64) {
+        let mut h = M3x15::zeros();
+        h.fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&Matrix3::identity());
+        let y = anchor - self.nav.state().p;
+        self.pseudo(&y, &h, std);
+    }
+
+    /// Zero-rate pseudo-measurement: at rest the true rate of turn is zero, so the mean measured
+    /// rate `mean_gyro` \[rad/s\] over `span_s` \[s\] is the gyroscope bias plus white noise of
+    /// variance `gyro_noise^2 / span_s` (floored at `std_min` \[rad/s\]).
+    pub fn zero_rate(&mut self, mean_gyro: Vector3<f64>, span_s: f64, std_min: f64) {
+        let mut h = M3x15::zeros();
+        h.fixed_view_mut::<3, 3>(0, 12)
+            .copy_from(&Matrix3::identity());
+        let y = mean_gyro - self.nav.gyro_bias;
+        let white = self.cfg.gyro_noise / span_s.max(1e-3).sqrt();
+        self.pseudo(&y, &h, white.max(std_min));
+    }
+
+    fn pseudo(&mut self, y: &Vector3<f64>, h: &M3x15, std: f64) {
+        let rm = Matrix3::identity() * (std * std);
+        let s = h * self.p * h.transpose() + rm;
+        if let Some(si) = s.try_inverse() {
+            self.correct(y, h, &rm, &si);
+            self.counters.rest_updates += 1;
+        }
+    }
+
+    /// The Kalman correction with innovation `y`, Jacobian `h`, measurement covariance `rm` and
+    /// inverse innovation covariance `si` (Joseph form), folded into the nominal state.
+    fn correct(&mut self, y: &Vector3<f64>, h: &M3x15, rm: &Matrix3<f64>, si: &Matrix3<f64>) {
         let k = self.p * h.transpose() * si;
         let dx: V15 = k * y;
         let ikh = M15::identity() - k * h;
         self.p = ikh * self.p * ikh.transpose() + k * rm * k.transpose();
         self.p = (self.p + self.p.transpose()) * 0.5;
-        let mut ns = st;
+        let mut ns = *self.nav.state();
         ns.p += dx.fixed_rows::<3>(0);
         ns.v += dx.fixed_rows::<3>(3);
         ns.q *= UnitQuaternion::from_scaled_axis(dx.fixed_rows::<3>(6).into_owned());
         self.nav.accel_bias += dx.fixed_rows::<3>(9);
         self.nav.gyro_bias += dx.fixed_rows::<3>(12);
         self.nav.set_state(ns);
-        self.counters.updates += 1;
     }
 }

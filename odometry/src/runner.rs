@@ -12,6 +12,9 @@
 //!   ([`guided`], the one health rule);
 //! * ego-velocity gating and the [`Rio`] updates (chi-square gate and velocity re-anchoring after
 //!   a run of gated measurements live in the filter);
+//! * rest ([`crate::rest`]): while the IMU is still and the radar's ego-velocity is zero, the
+//!   filter takes zero-velocity and zero-rate pseudo-measurements (gyro bias from the whole rest,
+//!   no drift);
 //! * IMU gaps: a frame more than [`ClassicalConfig::imu_gap_s`] after the last IMU sample is
 //!   dead-reckoned from its ego-velocity alone, and the filter re-anchors at the dead-reckoned
 //!   state when the IMU returns.
@@ -25,6 +28,7 @@
 use crate::ego_velocity::{
     Config as EgoConfig, Detection, EgoVelocityEstimator, Estimate, Prior, Status,
 };
+use crate::rest::{RestConfig, RestDetector};
 use crate::rio::{RadarMount, Rio, RioConfig, RioCounters, VelocityMeasurement};
 use crate::strapdown::{ImuSample, NavState};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
@@ -100,6 +104,8 @@ pub struct ClassicalConfig {
     pub velocity_cov_scale: f64,
     /// Sensor placement.
     pub mounting: Mounting,
+    /// Rest detection and the updates at rest.
+    pub rest: RestConfig,
     /// IMU silent for longer than this before a radar frame: the frame is dead-reckoned from
     /// its ego-velocity alone and the filter restarts when the IMU returns \[s\]
     /// (`f64::INFINITY`: never).
@@ -114,6 +120,7 @@ impl Default for ClassicalConfig {
             level_window_s: 1.0,
             velocity_cov_scale: 1.0,
             mounting: Mounting::default(),
+            rest: RestConfig::default(),
             imu_gap_s: 0.1,
         }
     }
@@ -160,6 +167,11 @@ pub struct RunnerCounters {
     pub imu_restarts: u64,
     /// Frames seen while levelling beyond [`EARLY_CAPACITY`] (no pose).
     pub early_dropped: u64,
+    /// IMU samples at which the body was at rest (IMU still, radar ego-velocity zero).
+    pub rest_samples: u64,
+    /// Frames whose ego-velocity was not applied because the body was at rest (the
+    /// zero-velocity update stands in).
+    pub rest_frames: u64,
 }
 
 /// Radar frame seen while levelling, measured and applied once the filter starts.
@@ -192,6 +204,9 @@ pub struct Runner {
     ego: EgoVelocityEstimator,
     est: Estimate,
     dets: Vec<Detection>,
+    rest: RestDetector,
+    // Where the current rest began (the position held while it lasts).
+    rest_anchor: Option<Vector3<f64>>,
     before: Option<Before>,
     rejected_in_row: u32,
     last_imu_t: Option<f64>,
@@ -228,6 +243,8 @@ impl Runner {
             ego: EgoVelocityEstimator::new(cfg.ego),
             est: Estimate::with_capacity(1024),
             dets: Vec::with_capacity(1024),
+            rest: RestDetector::new(cfg.rest),
+            rest_anchor: None,
             before: None,
             rejected_in_row: 0,
             last_imu_t: None,
@@ -437,6 +454,23 @@ impl Runner {
         rio.push_imu(s);
         let after = *rio.counters();
         self.track(before, after);
+        let due = self.rest.push_imu(&s);
+        if self.rest.at_rest(s.t) {
+            self.counters.rest_samples += 1;
+        } else {
+            self.rest_anchor = None;
+        }
+        if let (Some(u), Some(rio)) = (due, self.rio.as_mut()) {
+            let c = *self.rest.config();
+            rio.zero_velocity(c.zero_velocity_std);
+            if u.first || self.rest_anchor.is_none() {
+                self.rest_anchor = Some(rio.state().p);
+            }
+            if let Some(a) = self.rest_anchor {
+                rio.hold_position(a, c.hold_position_std);
+            }
+            rio.zero_rate(u.mean_gyro, u.span_s, c.zero_rate_std_min);
+        }
     }
 
     /// The ego-velocity of `dets` guided by `prior` (status counted).
@@ -488,6 +522,26 @@ impl Runner {
         });
         let guided_now = prior.is_some();
         let m = self.measure(t, dets, prior);
+        // The radar's verdict on rest: its own estimate (before the filter takes it) and the
+        // share of points with zero Doppler.
+        let zero = self.cfg.ego.sigma.abs();
+        let still = dets
+            .iter()
+            .filter(|d| d.radial_velocity.abs() <= zero)
+            .count();
+        self.rest.push_radar(
+            t,
+            m.map(|m| (m.velocity, m.covariance)),
+            still as f64 / dets.len().max(1) as f64,
+        );
+        // At rest the zero-velocity update replaces the frame's: the radar's own estimate is poor
+        // where its points do not spread (vertical velocity of a horizontal fan), the rest exact.
+        let m = if self.rest.at_rest(t) {
+            self.counters.rest_frames += u64::from(m.is_some());
+            None
+        } else {
+            m
+        };
         if let (Some(m), Some(rio)) = (m, self.rio.as_mut()) {
             let before = *rio.counters();
             rio.push_velocity(m);

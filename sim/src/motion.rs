@@ -123,6 +123,51 @@ pub struct Trajectory {
     pitch: [Wave; 2],
     roll: [Wave; 2],
     static_q: UnitQuaternion<f64>,
+    rest: Option<Rest>,
+}
+
+/// Rest at the start and at the end of a trajectory: motion time stands still, then ramps up
+/// (and at the end down) over [`REST_RAMP_S`] with a quintic smoothstep of the time rate, so
+/// velocity, acceleration and their derivative stay continuous.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Rest {
+    /// Motion starts here \[s\].
+    start_s: f64,
+    /// Motion has stopped here \[s\] (`f64::INFINITY`: never).
+    stop_s: f64,
+}
+
+/// Time over which motion starts after (and stops before) a rest \[s\].
+pub const REST_RAMP_S: f64 = 1.5;
+
+/// `int_0^x (6u^5 - 15u^4 + 10u^3) du`, the motion time gained over a ramp of unit length.
+fn ramp_integral(x: f64) -> f64 {
+    let x = x.clamp(0.0, 1.0);
+    x.powi(4) * (x * x - 3.0 * x + 2.5)
+}
+
+impl Rest {
+    /// Motion time at host time `t` \[s\].
+    fn warp(&self, t: f64) -> f64 {
+        let l = REST_RAMP_S;
+        let moving = |t: f64| {
+            let u = t - self.start_s;
+            if u <= 0.0 {
+                0.0
+            } else if u < l {
+                l * ramp_integral(u / l)
+            } else {
+                0.5 * l + (u - l)
+            }
+        };
+        let slow = self.stop_s - l;
+        if t <= slow {
+            return moving(t);
+        }
+        let base = moving(slow);
+        let x = ((self.stop_s - t) / l).max(0.0);
+        base + l * (0.5 - ramp_integral(x))
+    }
 }
 
 /// Largest heading change between two control points \[rad\].
@@ -255,7 +300,23 @@ impl Trajectory {
             pitch,
             roll,
             static_q,
+            rest: None,
         })
+    }
+
+    /// Rests for `start_s` \[s\] before moving and comes to rest `end_s` \[s\] before
+    /// `duration_s` (motion ramps up and down over [`REST_RAMP_S`] each). Zero rests leave the
+    /// trajectory as it was.
+    pub fn with_rest(mut self, start_s: f64, end_s: f64, duration_s: f64) -> Trajectory {
+        self.rest = (start_s > 0.0 || end_s > 0.0).then_some(Rest {
+            start_s: start_s.max(0.0),
+            stop_s: if end_s > 0.0 {
+                duration_s - end_s
+            } else {
+                f64::INFINITY
+            },
+        });
+        self
     }
 
     /// Segment index and local parameter of time `t` \[s\].
@@ -304,6 +365,7 @@ impl Trajectory {
 
     /// Body pose at host time `t` \[s\].
     pub fn pose(&self, t: f64) -> Pose {
+        let t = self.rest.map_or(t, |r| r.warp(t));
         let p2 = self.path(t);
         if self.kind == MotionKind::Static {
             return Pose {
@@ -392,5 +454,33 @@ mod tests {
             let mean = sum / n as f64;
             assert!(mean > vmin * 0.8 && mean < vmax, "{kind}: mean {mean} m/s");
         }
+    }
+
+    #[test]
+    fn rests_hold_the_pose_and_motion_ramps_smoothly() {
+        let world = World::generate(Family::Office, 2);
+        let moving = Trajectory::generate(MotionKind::Handheld, &world, 5, 40.0).unwrap();
+        let tr = moving.clone().with_rest(5.0, 8.0, 40.0);
+        let z = Vector3::zeros();
+        // At rest: the pose is the motion's first (or last) one, velocity and rate zero.
+        for t in [0.0, 2.0, 4.99, 32.01, 35.0, 39.9] {
+            assert!(tr.point_velocity(t, &z).norm() < 1e-9, "moving at {t}");
+            assert!(tr.angular_velocity(t, &UnitQuaternion::identity()).norm() < 1e-9);
+        }
+        assert!((tr.pose(1.0).p - moving.pose(0.0).p).norm() < 1e-12);
+        assert!((tr.pose(39.0).p - tr.pose(33.0).p).norm() < 1e-12);
+        // Moving between, and no jump in acceleration at the ramps' ends.
+        assert!(tr.point_velocity(20.0, &z).norm() > 0.3);
+        for edge in [5.0, 5.0 + REST_RAMP_S, 32.0 - REST_RAMP_S, 32.0] {
+            let a = tr.point_acceleration(edge - 0.01, &z);
+            let b = tr.point_acceleration(edge + 0.01, &z);
+            assert!(
+                (a - b).norm() < 0.5,
+                "acceleration jumps at {edge}: {a} vs {b}"
+            );
+        }
+        // Without rests the trajectory is unchanged.
+        let same = moving.clone().with_rest(0.0, 0.0, 40.0);
+        assert_eq!(same.pose(12.3).p, moving.pose(12.3).p);
     }
 }

@@ -62,6 +62,10 @@ pub struct Scenario {
     pub imu_baud: u32,
     /// IMU noise.
     pub imu_spec: ImuSpec,
+    /// Rest before the motion starts \[s\] (0: moving from the first sample).
+    pub rest_start_s: f64,
+    /// Rest after the motion stops, up to the end \[s\] (0: moving to the end).
+    pub rest_end_s: f64,
 }
 
 impl Scenario {
@@ -76,6 +80,8 @@ impl Scenario {
             imu_hz: 200.0,
             imu_baud: 921_600,
             imu_spec: ImuSpec::mti1(),
+            rest_start_s: 0.0,
+            rest_end_s: 0.0,
         }
     }
 
@@ -91,6 +97,25 @@ impl Scenario {
         if !(100.0..=400.0).contains(&self.imu_hz) {
             return bad(format!("IMU rate {} Hz is outside 100-400 Hz", self.imu_hz));
         }
+        let rests = self.rest_start_s + self.rest_end_s;
+        if !(self.rest_start_s >= 0.0 && self.rest_end_s >= 0.0 && rests.is_finite()) {
+            return bad(format!(
+                "rests {} s / {} s must be zero or positive",
+                self.rest_start_s, self.rest_end_s
+            ));
+        }
+        let ramps = f64::from(u8::from(self.rest_start_s > 0.0) + u8::from(self.rest_end_s > 0.0))
+            * crate::motion::REST_RAMP_S;
+        if self.motion != MotionKind::Static && rests > 0.0 && rests + ramps + 1.0 > self.duration_s
+        {
+            return bad(format!(
+                "rests of {} s and {} s leave under 1 s of motion in {} s (ramps take {} s each)",
+                self.rest_start_s,
+                self.rest_end_s,
+                self.duration_s,
+                crate::motion::REST_RAMP_S
+            ));
+        }
         let need = imu::MESSAGE_LEN as f64 * 10.0 * self.imu_hz;
         if need > 0.9 * f64::from(self.imu_baud) {
             return bad(format!(
@@ -103,8 +128,16 @@ impl Scenario {
 
     /// One line saying what this is.
     pub fn description(&self) -> String {
+        let rest = if self.rest_start_s > 0.0 || self.rest_end_s > 0.0 {
+            format!(
+                "; at rest {} s before and {} s after the motion",
+                self.rest_start_s, self.rest_end_s
+            )
+        } else {
+            String::new()
+        };
         format!(
-            "milliego sim {}: {} family, {} motion, seed {}, {} s; radar {} Hz, IMU {} Hz",
+            "milliego sim {}: {} family, {} motion, seed {}, {} s; radar {} Hz, IMU {} Hz{rest}",
             env!("CARGO_PKG_VERSION"),
             self.family,
             self.motion,
@@ -191,7 +224,8 @@ pub fn clocks(seed: u64) -> (SensorClock, SensorClock) {
 pub fn run(sc: &Scenario, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<Summary, SimError> {
     sc.validate()?;
     let world = World::generate(sc.family, sc.seed);
-    let traj = Trajectory::generate(sc.motion, &world, sc.seed, sc.duration_s + GT_TAIL_S)?;
+    let traj = Trajectory::generate(sc.motion, &world, sc.seed, sc.duration_s + GT_TAIL_S)?
+        .with_rest(sc.rest_start_s, sc.rest_end_s, sc.duration_s);
     let model = RadarModel::new(sc.radar_hz)?;
     let ext = extrinsics(sc.motion);
     let (t_br, q_br) = sensor_pose(&ext.radar);

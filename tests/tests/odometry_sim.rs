@@ -67,3 +67,118 @@ fn doppler_rio_beats_dead_reckoning_by_far_on_simulated_walks() {
         assert!((fit_ppm(r.imu_clock.unwrap().rate) - truth.imu_drift_ppm).abs() < 5.0);
     }
 }
+
+/// Doppler RIO over `s` with rest detection on or off.
+fn rio_run(s: &Session, rest: bool) -> milliego_odometry::offline::OfflineResult {
+    let mut cfg = OfflineConfig::default();
+    cfg.rest.enabled = rest;
+    run(s, &cfg).expect("offline run")
+}
+
+/// Largest distance of the trajectory's positions from its first one \[m\] over `from..to` \[s\].
+fn wander(r: &milliego_odometry::offline::OfflineResult, from: f64, to: f64) -> f64 {
+    let inside: Vec<_> = r
+        .trajectory
+        .iter()
+        .filter(|p| p.t >= from && p.t <= to)
+        .collect();
+    let Some(first) = inside.first() else {
+        return f64::INFINITY;
+    };
+    inside
+        .iter()
+        .map(|p| {
+            let d: [f64; 3] = std::array::from_fn(|k| p.p[k] - first.p[k]);
+            (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+        })
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn a_static_session_drifts_under_a_centimetre() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut sc = Scenario::new(Family::Office, MotionKind::Static, 21);
+    sc.duration_s = 30.0;
+    simulate(&sc, dir.path(), &mut |_| {}).expect("simulate");
+    let s = Session::open(dir.path()).unwrap();
+    let on = rio_run(&s, true);
+    let off = rio_run(&s, false);
+    let (d_on, d_off) = (wander(&on, 0.0, 1e9), wander(&off, 0.0, 1e9));
+    println!(
+        "static 30 s: drift {:.2} mm with rest updates ({} rest samples of {}, {} updates), {:.2} mm without",
+        d_on * 1e3,
+        on.rest_samples,
+        on.imu_samples,
+        on.rest_updates,
+        d_off * 1e3
+    );
+    assert!(d_on < 0.01, "static session drifted {d_on:.4} m");
+    // Rest is found after the first window (0.5 s) and a radar frame.
+    assert!(on.rest_samples as f64 > 0.9 * on.imu_samples as f64);
+    assert_eq!(off.rest_samples, 0, "rest detection off means off");
+}
+
+#[test]
+fn rests_are_found_only_at_rest_and_hold_the_pose_there() {
+    // Rest 8 s, walk, rest 6 s: the ends of the track must not drift, and the walk itself is never
+    // taken for rest (the first sample at rest is in the first rest, the last in the last).
+    let dir = tempfile::tempdir().unwrap();
+    let mut sc = Scenario::new(Family::Office, MotionKind::Handheld, 8);
+    sc.duration_s = 40.0;
+    sc.rest_start_s = 8.0;
+    sc.rest_end_s = 6.0;
+    simulate(&sc, dir.path(), &mut |_| {}).expect("simulate");
+    let s = Session::open(dir.path()).unwrap();
+    let on = rio_run(&s, true);
+    let off = rio_run(&s, false);
+    let gt = s.groundtruth().unwrap().expect("ground truth");
+    let t0 = gt.first().unwrap().t;
+    let end_rest = (t0 + 34.5, t0 + 39.5);
+    let (a_on, a_off) = (ate_of(&s, &on.trajectory), ate_of(&s, &off.trajectory));
+    let (w_on, w_off) = (
+        wander(&on, end_rest.0, end_rest.1),
+        wander(&off, end_rest.0, end_rest.1),
+    );
+    println!(
+        "rest 8 s + walk + rest 6 s: ATE {a_on:.3} m with rest updates ({} rest samples), {a_off:.3} m without; \
+         wander in the final rest {:.2} mm vs {:.2} mm",
+        on.rest_samples,
+        w_on * 1e3,
+        w_off * 1e3
+    );
+    assert!(w_on < 0.01, "the final rest wandered {w_on:.4} m");
+    // Rest samples: at most the two rests' IMU samples (200 Hz), at least most of them.
+    let rest_max = (8.0 + 6.0) * 200.0;
+    assert!(
+        (on.rest_samples as f64) < rest_max && (on.rest_samples as f64) > 0.7 * rest_max,
+        "{} rest samples for 14 s of rest",
+        on.rest_samples
+    );
+    assert!(
+        a_on <= a_off * 1.05 + 0.01,
+        "rest updates made ATE worse: {a_on:.3} vs {a_off:.3} m"
+    );
+}
+
+#[test]
+fn a_cruising_robot_is_never_taken_for_at_rest() {
+    // Smooth planar motion at 0.2-0.6 m/s: the IMU is as still as at rest, the Doppler is not.
+    let dir = tempfile::tempdir().unwrap();
+    let mut sc = Scenario::new(Family::Corridor, MotionKind::Robot, 5);
+    sc.duration_s = 30.0;
+    simulate(&sc, dir.path(), &mut |_| {}).expect("simulate");
+    let s = Session::open(dir.path()).unwrap();
+    let on = rio_run(&s, true);
+    let off = rio_run(&s, false);
+    println!("robot: {} rest samples", on.rest_samples);
+    assert_eq!(on.rest_samples, 0);
+    assert_eq!(on.trajectory, off.trajectory, "no rest, no change");
+}
+
+fn ate_of(s: &Session, est: &[milliego_session::TumPose]) -> f64 {
+    let gt = Trajectory::from_tum(&s.groundtruth().unwrap().expect("ground truth"));
+    evaluate(&gt, &Trajectory::from_tum(est), &Settings::default())
+        .expect("evaluation")
+        .ate
+        .rmse
+}

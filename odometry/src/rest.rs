@@ -1,0 +1,387 @@
+//! Rest detection from the IMU and the radar together.
+//!
+//! The IMU alone cannot tell rest from steady motion: a robot cruising straight at 0.5 m/s reads
+//! gravity and a constant rate of turn, just as it does parked. A static scene's Doppler can: at
+//! rest its points have zero Doppler. Each radar frame gives a verdict:
+//!
+//! * still: at least [`RestConfig::zero_doppler_share_min`] of its points have zero Doppler
+//!   (within the Doppler noise) and its ego-velocity is consistent with zero under its own
+//!   covariance (chi-square, 3 dof, 99.9%);
+//! * moving: its ego-velocity is inconsistent with zero, or fewer than
+//!   [`RestConfig::moving_share_max`] of its points have zero Doppler;
+//! * no verdict otherwise (or without an ego-velocity). A radar in a horizontal fan hardly sees
+//!   vertical velocity (0.1-0.5 m/s vertical noise at rest in the simulator), so the estimate's
+//!   size alone cannot call rest.
+//!
+//! Rest starts when the IMU is still (over the last [`RestConfig::window_s`] the spread, square
+//! root of the covariance trace, of the specific force is below [`RestConfig::accel_std_max`]
+//! and that of the rate of turn below [`RestConfig::gyro_std_max`]; the mean rate is below
+//! [`RestConfig::gyro_rate_max`] and the mean specific force is gravity within
+//! [`RestConfig::gravity_tolerance`]) and the latest verdict, at most
+//! [`RestConfig::radar_max_age_s`] old, is still. It lasts while the IMU stays still and no frame
+//! says moving: single frames with too much multipath do not break it.
+//!
+//! While at rest the filter takes zero-velocity, position-hold and zero-rate pseudo-measurements
+//! ([`crate::rio::Rio::zero_velocity`], [`crate::rio::Rio::hold_position`],
+//! [`crate::rio::Rio::zero_rate`]) every [`RestConfig::update_period_s`]: the velocity stays zero,
+//! the position where the rest began (a tilt or accelerometer-bias error would otherwise creep it
+//! by millimetres per update, and is learned instead), the gyroscope bias is learned from the
+//! whole rest (not only from the levelling window) and the heading stops drifting. Without radar
+//! (IMU dead reckoning) the body is never taken to be at rest.
+//!
+//! No allocation after construction: the window is a ring of at most [`REST_CAPACITY`] samples.
+
+use crate::strapdown::ImuSample;
+use nalgebra::Vector3;
+use std::collections::VecDeque;
+
+/// IMU samples kept for the stillness test at most (the window shrinks to this many at high
+/// rates: 1.28 s at 400 Hz).
+pub const REST_CAPACITY: usize = 512;
+
+/// Shortest IMU window the stillness test decides on \[s\].
+pub const MIN_SPAN_S: f64 = 0.1;
+
+/// Chi-square bound (3 dof, 99.9%) for "the radar's ego-velocity is consistent with zero".
+const ZERO_GATE: f64 = 16.27;
+
+/// Rest detection and the pseudo-measurements taken at rest.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RestConfig {
+    /// Detect rest and apply the zero-velocity / zero-rate updates.
+    pub enabled: bool,
+    /// IMU window of the stillness test \[s\].
+    pub window_s: f64,
+    /// Largest specific-force spread (sqrt of the covariance trace) still counted as rest
+    /// \[m/s^2\].
+    pub accel_std_max: f64,
+    /// Largest rate-of-turn spread (sqrt of the covariance trace) still counted as rest
+    /// \[rad/s\].
+    pub gyro_std_max: f64,
+    /// Largest mean rate of turn over the window \[rad/s\] (above any MEMS gyro's bias; a robot
+    /// turning on the spot at a steady rate has little spread but this much rate).
+    pub gyro_rate_max: f64,
+    /// Gravity \[m/s^2\] and the largest difference of the window's mean specific-force magnitude
+    /// from it \[m/s^2\].
+    pub gravity: f64,
+    /// See [`RestConfig::gravity`].
+    pub gravity_tolerance: f64,
+    /// Smallest share of a frame's points with zero Doppler (within the ego-velocity's Doppler
+    /// noise `sigma`) for the radar to call it rest. Moving at 0.2 m/s or faster, a forward-looking
+    /// radar sees no static point at zero Doppler; at rest about half the points of a cluttered
+    /// room are (the rest are multipath and false alarms with their own Doppler).
+    pub zero_doppler_share_min: f64,
+    /// Largest share of points with zero Doppler in a frame that says "moving".
+    pub moving_share_max: f64,
+    /// The radar's verdict counts this long after its frame \[s\].
+    pub radar_max_age_s: f64,
+    /// Time between two pairs of rest updates \[s\].
+    pub update_period_s: f64,
+    /// Standard deviation of the zero-velocity pseudo-measurement \[m/s\] (a rig put down
+    /// or held still still moves by millimetres per second).
+    pub zero_velocity_std: f64,
+    /// Standard deviation of the position-hold pseudo-measurement \[m\]: at rest the position
+    /// stays where the rest began.
+    pub hold_position_std: f64,
+    /// Floor of the zero-rate pseudo-measurement's standard deviation \[rad/s\] (its white-noise
+    /// part is the gyro noise density over the update period).
+    pub zero_rate_std_min: f64,
+}
+
+impl Default for RestConfig {
+    fn default() -> Self {
+        RestConfig {
+            enabled: true,
+            window_s: 0.5,
+            accel_std_max: 0.1,
+            gyro_std_max: 0.02,
+            gyro_rate_max: 0.05,
+            gravity: crate::strapdown::STANDARD_GRAVITY,
+            gravity_tolerance: 0.3,
+            zero_doppler_share_min: 0.35,
+            moving_share_max: 0.15,
+            radar_max_age_s: 0.3,
+            update_period_s: 0.05,
+            zero_velocity_std: 0.01,
+            hold_position_std: 0.001,
+            zero_rate_std_min: 0.002,
+        }
+    }
+}
+
+/// The detector's state.
+#[derive(Debug, Clone)]
+pub struct RestDetector {
+    cfg: RestConfig,
+    window: VecDeque<ImuSample>,
+    /// Time \[s\] and verdict of the radar's latest frame.
+    radar: Option<(f64, Verdict)>,
+    resting: bool,
+    /// Rate-of-turn sum and sample count since the last rest update (the zero-rate measurement).
+    gyro_sum: Vector3<f64>,
+    gyro_n: u32,
+    since: Option<f64>,
+    last_update: Option<f64>,
+}
+
+/// A radar frame's word on rest.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Verdict {
+    Still,
+    Moving,
+    None,
+}
+
+/// What the runner should apply after an IMU sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RestUpdate {
+    /// Mean rate of turn since the previous rest update \[rad/s\].
+    pub mean_gyro: Vector3<f64>,
+    /// Over this long \[s\].
+    pub span_s: f64,
+    /// The first update of this rest (the position to hold is taken now).
+    pub first: bool,
+}
+
+impl RestDetector {
+    /// A detector with `cfg`.
+    pub fn new(cfg: RestConfig) -> RestDetector {
+        RestDetector {
+            cfg,
+            window: VecDeque::with_capacity(REST_CAPACITY),
+            radar: None,
+            resting: false,
+            gyro_sum: Vector3::zeros(),
+            gyro_n: 0,
+            since: None,
+            last_update: None,
+        }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &RestConfig {
+        &self.cfg
+    }
+
+    /// A radar frame at `t` \[s\]: its ego-velocity \[m/s\] with covariance, or `None` when the
+    /// frame gave none (too few points, no consensus: no verdict of rest), and the share of its
+    /// points whose Doppler is zero (within the Doppler noise).
+    pub fn push_radar(
+        &mut self,
+        t: f64,
+        velocity: Option<([f64; 3], [[f64; 3]; 3])>,
+        zero_share: f64,
+    ) {
+        let verdict = match velocity {
+            None => Verdict::None,
+            Some((v, c)) => {
+                let v = Vector3::from(v);
+                let c = nalgebra::Matrix3::from_fn(|i, j| c[i][j]);
+                let d2 = c
+                    .try_inverse()
+                    .map_or(f64::INFINITY, |ci| (v.transpose() * ci * v)[(0, 0)]);
+                if d2 > ZERO_GATE || zero_share < self.cfg.moving_share_max {
+                    Verdict::Moving
+                } else if zero_share >= self.cfg.zero_doppler_share_min {
+                    Verdict::Still
+                } else {
+                    Verdict::None
+                }
+            }
+        };
+        // Frames may arrive out of order by a sample: keep the newest verdict.
+        if self.radar.is_none_or(|(t0, _)| t >= t0) {
+            self.radar = Some((t, verdict));
+        }
+    }
+
+    /// One IMU sample; returns the rest update due now, if the body is at rest and one is due.
+    pub fn push_imu(&mut self, s: &ImuSample) -> Option<RestUpdate> {
+        if !self.cfg.enabled {
+            return None;
+        }
+        if self.window.len() == REST_CAPACITY {
+            self.window.pop_front();
+        }
+        self.window.push_back(*s);
+        while self
+            .window
+            .front()
+            .is_some_and(|f| s.t - f.t > self.cfg.window_s)
+        {
+            self.window.pop_front();
+        }
+        self.resting = self.at_rest(s.t);
+        if !self.resting {
+            self.since = None;
+            self.gyro_sum = Vector3::zeros();
+            self.gyro_n = 0;
+            return None;
+        }
+        self.gyro_sum += Vector3::from(s.gyro);
+        self.gyro_n += 1;
+        let since = *self.since.get_or_insert(s.t);
+        let from = self.last_update.map_or(since, |l| l.max(since));
+        if s.t - from < self.cfg.update_period_s {
+            return None;
+        }
+        let u = RestUpdate {
+            mean_gyro: self.gyro_sum / f64::from(self.gyro_n.max(1)),
+            span_s: s.t - from,
+            first: self.last_update.is_none_or(|l| l < since),
+        };
+        self.gyro_sum = Vector3::zeros();
+        self.gyro_n = 0;
+        self.last_update = Some(s.t);
+        Some(u)
+    }
+
+    /// True when the body is at rest at `t` \[s\]: the IMU window is still and either the latest
+    /// radar verdict (recent) is still, or the body was at rest and no frame since says moving.
+    pub fn at_rest(&self, t: f64) -> bool {
+        if !self.imu_still() {
+            return false;
+        }
+        match self.radar {
+            Some((_, Verdict::Moving)) | None => false,
+            Some((tr, Verdict::Still)) if (t - tr).abs() <= self.cfg.radar_max_age_s => true,
+            Some(_) => self.resting,
+        }
+    }
+
+    /// True when the IMU window holds at least 10 samples over [`MIN_SPAN_S`] (so a rest at the
+    /// start is found by the first radar frames), both triads' spreads are below their bounds, the
+    /// mean rate of turn is below [`RestConfig::gyro_rate_max`] and the mean specific force is
+    /// gravity within [`RestConfig::gravity_tolerance`].
+    pub fn imu_still(&self) -> bool {
+        let (Some(first), Some(last)) = (self.window.front(), self.window.back()) else {
+            return false;
+        };
+        if self.window.len() < 10 || last.t - first.t < MIN_SPAN_S.min(self.cfg.window_s) {
+            return false;
+        }
+        // Mean and spread (sqrt of the covariance trace) of one triad over the window.
+        let stats = |get: fn(&ImuSample) -> [f64; 3]| {
+            let n = self.window.len() as f64;
+            let mean = self
+                .window
+                .iter()
+                .fold(Vector3::zeros(), |a, s| a + Vector3::from(get(s)))
+                / n;
+            let var = self
+                .window
+                .iter()
+                .map(|s| (Vector3::from(get(s)) - mean).norm_squared())
+                .sum::<f64>()
+                / (n - 1.0);
+            (mean, var.sqrt())
+        };
+        let (f, f_std) = stats(|s| s.accel);
+        let (w, w_std) = stats(|s| s.gyro);
+        // A steady turn or a steady pull has little spread: the means must be those of rest too.
+        f_std < self.cfg.accel_std_max
+            && w_std < self.cfg.gyro_std_max
+            && w.norm() < self.cfg.gyro_rate_max
+            && (f.norm() - self.cfg.gravity).abs() < self.cfg.gravity_tolerance
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn still_imu(t: f64) -> ImuSample {
+        // Tiny white-ish wobble, far below the stillness bounds.
+        let w = 1e-4 * ((t * 1234.5).sin());
+        ImuSample {
+            t,
+            accel: [w, -w, 9.81 + w],
+            gyro: [0.003 + w, -0.002, 0.001 - w],
+        }
+    }
+
+    const ZERO: Option<([f64; 3], [[f64; 3]; 3])> = Some((
+        [0.0; 3],
+        [[0.01, 0.0, 0.0], [0.0, 0.01, 0.0], [0.0, 0.0, 1.0]],
+    ));
+    const FAST: Option<([f64; 3], [[f64; 3]; 3])> = Some((
+        [0.0, 0.5, 0.0],
+        [[0.01, 0.0, 0.0], [0.0, 0.01, 0.0], [0.0, 0.0, 1.0]],
+    ));
+
+    /// Feeds 200 Hz still IMU samples over `from..to` \[s\]; returns the updates due.
+    fn feed(d: &mut RestDetector, from: f64, to: f64) -> Vec<RestUpdate> {
+        let mut out = Vec::new();
+        let mut t = from;
+        while t < to {
+            out.extend(d.push_imu(&still_imu(t)));
+            t += 0.005;
+        }
+        out
+    }
+
+    #[test]
+    fn a_still_imu_alone_is_not_rest() {
+        let mut d = RestDetector::new(RestConfig::default());
+        assert!(feed(&mut d, 0.0, 2.0).is_empty());
+        assert!(d.imu_still() && !d.at_rest(2.0));
+        // A cruising robot: the IMU is still, the Doppler says moving.
+        d.push_radar(2.0, FAST, 0.0);
+        assert!(feed(&mut d, 2.0, 3.0).is_empty());
+    }
+
+    #[test]
+    fn rest_needs_the_radar_lasts_through_frames_without_a_verdict_and_ends_on_motion() {
+        let mut d = RestDetector::new(RestConfig::default());
+        feed(&mut d, 0.0, 1.0);
+        d.push_radar(1.0, ZERO, 0.6);
+        let ups = feed(&mut d, 1.0, 1.3);
+        assert!(d.at_rest(1.3));
+        assert!(ups.len() >= 5 && ups[0].first && !ups[1].first, "{ups:?}");
+        // The zero-rate measurement is the mean rate over the span.
+        assert!((ups[1].mean_gyro - Vector3::new(0.003, -0.002, 0.001)).norm() < 1e-3);
+        assert!((ups[1].span_s - 0.05).abs() < 0.006);
+        // A frame full of multipath gives no verdict: the rest goes on past the verdict's age.
+        d.push_radar(1.3, ZERO, 0.2);
+        assert!(!feed(&mut d, 1.3, 2.0).is_empty() && d.at_rest(2.0));
+        // A frame that says moving ends it at once.
+        d.push_radar(2.0, FAST, 0.1);
+        assert!(!d.at_rest(2.0));
+        assert!(feed(&mut d, 2.0, 2.5).is_empty());
+        // So does an IMU that moves.
+        d.push_radar(2.5, ZERO, 0.9);
+        assert!(!feed(&mut d, 2.5, 2.7).is_empty());
+        let shake = ImuSample {
+            t: 2.7,
+            accel: [3.0, 0.0, 9.81],
+            gyro: [0.0, 0.5, 0.0],
+        };
+        assert!(d.push_imu(&shake).is_none() && !d.at_rest(2.7));
+    }
+
+    #[test]
+    fn a_steady_turn_is_not_still() {
+        let mut d = RestDetector::new(RestConfig::default());
+        let mut t = 0.0;
+        while t < 1.0 {
+            d.push_imu(&ImuSample {
+                t,
+                accel: [0.0, 0.0, 9.81],
+                gyro: [0.0, 0.0, 0.3],
+            });
+            t += 0.005;
+        }
+        d.push_radar(1.0, ZERO, 0.9);
+        assert!(!d.imu_still() && !d.at_rest(1.0));
+    }
+
+    #[test]
+    fn disabled_means_never() {
+        let mut d = RestDetector::new(RestConfig {
+            enabled: false,
+            ..RestConfig::default()
+        });
+        d.push_radar(0.5, ZERO, 1.0);
+        assert!(feed(&mut d, 0.0, 2.0).is_empty());
+    }
+}
