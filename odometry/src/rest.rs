@@ -8,8 +8,9 @@
 //!   (within the Doppler noise) and its ego-velocity is consistent with zero under its own
 //!   covariance (chi-square, 3 dof, 99.9%);
 //! * moving: its ego-velocity is inconsistent with zero, or fewer than
-//!   [`RestConfig::moving_share_max`] of its points have zero Doppler;
-//! * no verdict otherwise (or without an ego-velocity). A radar in a horizontal fan hardly sees
+//!   [`RestConfig::moving_share_max`] of its points (at least [`MIN_SHARE_POINTS`] of them) have
+//!   zero Doppler, with or without an ego-velocity;
+//! * no verdict otherwise. A radar in a horizontal fan hardly sees
 //!   vertical velocity (0.1-0.5 m/s vertical noise at rest in the simulator), so the estimate's
 //!   size alone cannot call rest.
 //!
@@ -38,6 +39,9 @@ use std::collections::VecDeque;
 /// IMU samples kept for the stillness test at most (the window shrinks to this many at high
 /// rates: 1.28 s at 400 Hz).
 pub const REST_CAPACITY: usize = 512;
+
+/// Fewest points for a frame's zero-Doppler share to say "moving" on its own.
+pub const MIN_SHARE_POINTS: usize = 5;
 
 /// Shortest IMU window the stillness test decides on \[s\].
 pub const MIN_SPAN_S: f64 = 0.1;
@@ -114,9 +118,12 @@ impl Default for RestConfig {
 pub struct RestDetector {
     cfg: RestConfig,
     window: VecDeque<ImuSample>,
-    /// Time \[s\] and verdict of the radar's latest frame.
-    radar: Option<(f64, Verdict)>,
-    resting: bool,
+    /// The latest radar verdicts, oldest first, with their frame times \[s\].
+    verdicts: VecDeque<(f64, Verdict)>,
+    /// Whether the last decided sample was at rest, and the one before it.
+    resting: [bool; 2],
+    /// Whether the IMU was still at the last decided sample, and at the one before it.
+    still: [bool; 2],
     /// Rate-of-turn sum and sample count since the last rest update (the zero-rate measurement).
     gyro_sum: Vector3<f64>,
     gyro_n: u32,
@@ -124,17 +131,26 @@ pub struct RestDetector {
     last_update: Option<f64>,
 }
 
+/// Radar verdicts kept (frames come every 30-100 ms, IMU samples every 2.5-10 ms: one or two
+/// lie ahead of the sample being evaluated at most).
+const VERDICTS: usize = 4;
+
 /// A radar frame's word on rest.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Verdict {
+pub enum Verdict {
+    /// Most points at zero Doppler and the ego-velocity consistent with zero.
     Still,
+    /// The ego-velocity is not zero, or hardly any point is at zero Doppler.
     Moving,
+    /// Neither.
     None,
 }
 
-/// What the runner should apply after an IMU sample.
+/// The pseudo-measurements due for one IMU sample at rest.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RestUpdate {
+    /// Time of the sample at rest \[s\].
+    pub t: f64,
     /// Mean rate of turn since the previous rest update \[rad/s\].
     pub mean_gyro: Vector3<f64>,
     /// Over this long \[s\].
@@ -149,8 +165,9 @@ impl RestDetector {
         RestDetector {
             cfg,
             window: VecDeque::with_capacity(REST_CAPACITY),
-            radar: None,
-            resting: false,
+            verdicts: VecDeque::with_capacity(VERDICTS),
+            resting: [false; 2],
+            still: [false; 2],
             gyro_sum: Vector3::zeros(),
             gyro_n: 0,
             since: None,
@@ -164,42 +181,47 @@ impl RestDetector {
     }
 
     /// A radar frame at `t` \[s\]: its ego-velocity \[m/s\] with covariance, or `None` when the
-    /// frame gave none (too few points, no consensus: no verdict of rest), and the share of its
-    /// points whose Doppler is zero (within the Doppler noise).
+    /// frame gave none (too few points, no consensus), and how many of its `points` have zero
+    /// Doppler (within the Doppler noise). Returns the frame's verdict.
     pub fn push_radar(
         &mut self,
         t: f64,
         velocity: Option<([f64; 3], [[f64; 3]; 3])>,
-        zero_share: f64,
-    ) {
-        let verdict = match velocity {
-            None => Verdict::None,
-            Some((v, c)) => {
-                let v = Vector3::from(v);
-                let c = nalgebra::Matrix3::from_fn(|i, j| c[i][j]);
-                let d2 = c
-                    .try_inverse()
-                    .map_or(f64::INFINITY, |ci| (v.transpose() * ci * v)[(0, 0)]);
-                if d2 > ZERO_GATE || zero_share < self.cfg.moving_share_max {
-                    Verdict::Moving
-                } else if zero_share >= self.cfg.zero_doppler_share_min {
-                    Verdict::Still
-                } else {
-                    Verdict::None
-                }
-            }
+        zero_doppler: usize,
+        points: usize,
+    ) -> Verdict {
+        let share = zero_doppler as f64 / points.max(1) as f64;
+        let d2 = velocity.map(|(v, c)| {
+            let v = Vector3::from(v);
+            let c = nalgebra::Matrix3::from_fn(|i, j| c[i][j]);
+            c.try_inverse()
+                .map_or(f64::INFINITY, |ci| (v.transpose() * ci * v)[(0, 0)])
+        });
+        let verdict = if (points >= MIN_SHARE_POINTS && share < self.cfg.moving_share_max)
+            || d2.is_some_and(|d2| d2 > ZERO_GATE)
+        {
+            Verdict::Moving
+        } else if d2.is_some() && share >= self.cfg.zero_doppler_share_min {
+            Verdict::Still
+        } else {
+            Verdict::None
         };
-        // Frames may arrive out of order by a sample: keep the newest verdict.
-        if self.radar.is_none_or(|(t0, _)| t >= t0) {
-            self.radar = Some((t, verdict));
+        if self.verdicts.len() == VERDICTS {
+            self.verdicts.pop_front();
         }
+        self.verdicts.push_back((t, verdict));
+        verdict
     }
 
-    /// One IMU sample; returns the rest update due now, if the body is at rest and one is due.
+    /// One IMU sample. It decides on the PREVIOUS sample (with the frames up to that sample's
+    /// time, whichever order frames and samples came in) and returns the updates due there; the
+    /// caller applies them before propagating to `s`. So a stream where each frame comes just
+    /// before the first sample past it and one where it comes just after give the same result.
     pub fn push_imu(&mut self, s: &ImuSample) -> Option<RestUpdate> {
         if !self.cfg.enabled {
             return None;
         }
+        let due = self.evaluate();
         if self.window.len() == REST_CAPACITY {
             self.window.pop_front();
         }
@@ -211,8 +233,17 @@ impl RestDetector {
         {
             self.window.pop_front();
         }
-        self.resting = self.at_rest(s.t);
-        if !self.resting {
+        due
+    }
+
+    /// Rest at the newest sample of the window (see [`RestDetector::push_imu`]).
+    fn evaluate(&mut self) -> Option<RestUpdate> {
+        let s = *self.window.back()?;
+        let still = self.imu_still();
+        self.still = [still, self.still[0]];
+        let now = still && self.radar_agrees(s.t);
+        self.resting = [now, self.resting[0]];
+        if !now {
             self.since = None;
             self.gyro_sum = Vector3::zeros();
             self.gyro_n = 0;
@@ -226,6 +257,7 @@ impl RestDetector {
             return None;
         }
         let u = RestUpdate {
+            t: s.t,
             mean_gyro: self.gyro_sum / f64::from(self.gyro_n.max(1)),
             span_s: s.t - from,
             first: self.last_update.is_none_or(|l| l < since),
@@ -236,16 +268,34 @@ impl RestDetector {
         Some(u)
     }
 
-    /// True when the body is at rest at `t` \[s\]: the IMU window is still and either the latest
-    /// radar verdict (recent) is still, or the body was at rest and no frame since says moving.
-    pub fn at_rest(&self, t: f64) -> bool {
-        if !self.imu_still() {
-            return false;
-        }
-        match self.radar {
+    /// Whether the last sample decided on was at rest.
+    pub fn resting(&self) -> bool {
+        self.resting[0]
+    }
+
+    /// Whether the sample decided on before that one was at rest.
+    pub fn resting_before(&self) -> bool {
+        self.resting[1]
+    }
+
+    /// [`RestDetector::resting_before`] when `before`, else [`RestDetector::resting`].
+    pub fn resting_before_frame(&self, before: bool) -> bool {
+        self.resting[usize::from(before)]
+    }
+
+    /// Whether the IMU was still at the last decided sample (`before`: at the one before it).
+    pub fn was_still(&self, before: bool) -> bool {
+        self.still[usize::from(before)]
+    }
+
+    /// The radar's side of rest at `t` \[s\]: the newest verdict up to `t` is still (and recent),
+    /// or the body was at rest and no frame since says moving.
+    fn radar_agrees(&self, t: f64) -> bool {
+        let latest = self.verdicts.iter().rev().find(|(tr, _)| *tr <= t);
+        match latest {
             Some((_, Verdict::Moving)) | None => false,
-            Some((tr, Verdict::Still)) if (t - tr).abs() <= self.cfg.radar_max_age_s => true,
-            Some(_) => self.resting,
+            Some((tr, Verdict::Still)) if t - tr <= self.cfg.radar_max_age_s => true,
+            Some(_) => self.resting[0],
         }
     }
 
@@ -324,39 +374,54 @@ mod tests {
     fn a_still_imu_alone_is_not_rest() {
         let mut d = RestDetector::new(RestConfig::default());
         assert!(feed(&mut d, 0.0, 2.0).is_empty());
-        assert!(d.imu_still() && !d.at_rest(2.0));
+        assert!(d.imu_still() && !d.resting());
         // A cruising robot: the IMU is still, the Doppler says moving.
-        d.push_radar(2.0, FAST, 0.0);
+        d.push_radar(2.0, FAST, 0, 20);
         assert!(feed(&mut d, 2.0, 3.0).is_empty());
+        assert!(!d.resting());
     }
 
     #[test]
     fn rest_needs_the_radar_lasts_through_frames_without_a_verdict_and_ends_on_motion() {
         let mut d = RestDetector::new(RestConfig::default());
         feed(&mut d, 0.0, 1.0);
-        d.push_radar(1.0, ZERO, 0.6);
+        d.push_radar(1.0, ZERO, 12, 20);
         let ups = feed(&mut d, 1.0, 1.3);
-        assert!(d.at_rest(1.3));
+        assert!(d.resting());
         assert!(ups.len() >= 5 && ups[0].first && !ups[1].first, "{ups:?}");
+        // The first sample decided at rest is the first at or past the frame.
+        assert!(ups[0].t >= 1.0 && ups[0].t < 1.0 + 0.05 + 0.006, "{ups:?}");
         // The zero-rate measurement is the mean rate over the span.
         assert!((ups[1].mean_gyro - Vector3::new(0.003, -0.002, 0.001)).norm() < 1e-3);
         assert!((ups[1].span_s - 0.05).abs() < 0.006);
         // A frame full of multipath gives no verdict: the rest goes on past the verdict's age.
-        d.push_radar(1.3, ZERO, 0.2);
-        assert!(!feed(&mut d, 1.3, 2.0).is_empty() && d.at_rest(2.0));
-        // A frame that says moving ends it at once.
-        d.push_radar(2.0, FAST, 0.1);
-        assert!(!d.at_rest(2.0));
-        assert!(feed(&mut d, 2.0, 2.5).is_empty());
+        d.push_radar(1.3, ZERO, 4, 20);
+        assert!(!feed(&mut d, 1.3, 2.0).is_empty() && d.resting());
+        // A frame that says moving ends it from the first sample at or past it.
+        d.push_radar(2.0, FAST, 2, 20);
+        assert!(feed(&mut d, 2.0, 2.5).iter().all(|u| u.t < 2.0));
+        assert!(!d.resting() && !d.resting_before());
         // So does an IMU that moves.
-        d.push_radar(2.5, ZERO, 0.9);
-        assert!(!feed(&mut d, 2.5, 2.7).is_empty());
+        d.push_radar(2.5, ZERO, 18, 20);
+        assert!(!feed(&mut d, 2.5, 2.7).is_empty() && d.resting());
         let shake = ImuSample {
             t: 2.7,
             accel: [3.0, 0.0, 9.81],
             gyro: [0.0, 0.5, 0.0],
         };
-        assert!(d.push_imu(&shake).is_none() && !d.at_rest(2.7));
+        d.push_imu(&shake);
+        assert!(d.push_imu(&still_imu(2.705)).is_none() && !d.resting());
+    }
+
+    #[test]
+    fn a_frame_ahead_of_the_sample_being_decided_waits_for_its_time() {
+        // Frames may be in before the samples they precede (the offline order): a frame at 1.2 s
+        // does not decide the samples before 1.2 s.
+        let mut d = RestDetector::new(RestConfig::default());
+        feed(&mut d, 0.0, 1.0);
+        d.push_radar(1.2, ZERO, 18, 20);
+        assert!(feed(&mut d, 1.0, 1.2).is_empty() && !d.resting());
+        assert!(!feed(&mut d, 1.2, 1.4).is_empty() && d.resting());
     }
 
     #[test]
@@ -371,8 +436,9 @@ mod tests {
             });
             t += 0.005;
         }
-        d.push_radar(1.0, ZERO, 0.9);
-        assert!(!d.imu_still() && !d.at_rest(1.0));
+        d.push_radar(1.0, ZERO, 18, 20);
+        assert!(d.push_imu(&still_imu(1.0)).is_none());
+        assert!(!d.imu_still() && !d.resting());
     }
 
     #[test]
@@ -381,7 +447,7 @@ mod tests {
             enabled: false,
             ..RestConfig::default()
         });
-        d.push_radar(0.5, ZERO, 1.0);
+        d.push_radar(0.5, ZERO, 20, 20);
         assert!(feed(&mut d, 0.0, 2.0).is_empty());
     }
 }

@@ -28,7 +28,7 @@
 use crate::ego_velocity::{
     Config as EgoConfig, Detection, EgoVelocityEstimator, Estimate, Prior, Status,
 };
-use crate::rest::{RestConfig, RestDetector};
+use crate::rest::{RestConfig, RestDetector, Verdict};
 use crate::rio::{RadarMount, Rio, RioConfig, RioCounters, VelocityMeasurement};
 use crate::strapdown::{ImuSample, NavState};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
@@ -48,10 +48,17 @@ pub const LEVEL_CAPACITY: usize = 4096;
 /// Radar frames kept while levelling at most (later ones get no pose).
 pub const EARLY_CAPACITY: usize = 256;
 
-/// The health rule: whether a filter with `updates` applied radar updates and `rejected_in_row`
-/// frames rejected in a row may guide the next frame's ego-velocity with its prediction.
+/// The health rule: whether a filter with `updates` applied radar updates (and rest updates, which
+/// pin the velocity as well) and `rejected_in_row` frames rejected in a row may guide the next
+/// frame's ego-velocity with its prediction.
 pub fn guided(updates: u64, rejected_in_row: u32) -> bool {
     updates >= GUIDE_AFTER_UPDATES && rejected_in_row < MAX_REJECTED_IN_ROW
+}
+
+/// The updates the health rule counts: radar updates applied and rest updates (which pin the
+/// velocity as well).
+fn health_updates(c: &RioCounters) -> u64 {
+    c.updates + c.rest_updates
 }
 
 /// Where the sensors sit on the body (body frame = the ground-truth body frame).
@@ -290,7 +297,7 @@ impl Runner {
     pub fn guiding(&self) -> bool {
         self.rio
             .as_ref()
-            .is_some_and(|r| guided(r.counters().updates, self.rejected_in_row))
+            .is_some_and(|r| guided(health_updates(r.counters()), self.rejected_in_row))
     }
 
     /// Time \[s\], body pose in the world frame and world velocity \[m/s\] of the current state
@@ -340,7 +347,7 @@ impl Runner {
         };
         self.before = Some(Before {
             prior: rio.predicted_radar_velocity(),
-            updates: rio.counters().updates,
+            updates: health_updates(rio.counters()),
         });
         self.filter_imu(s);
         while let Some(&(id, t)) = self.waiting.front() {
@@ -394,7 +401,7 @@ impl Runner {
                 self.current_prior()
             };
             let dets = std::mem::take(&mut self.dets);
-            self.radar_update(f.t, &dets, prior);
+            self.radar_update(f.t, behind, &dets, prior);
             self.dets = dets;
         }
         if behind {
@@ -433,7 +440,8 @@ impl Runner {
     /// The filter's prior for a frame now, when it is healthy.
     fn current_prior(&self) -> Option<([f64; 3], [[f64; 3]; 3])> {
         let rio = self.rio.as_ref()?;
-        guided(rio.counters().updates, self.rejected_in_row).then(|| rio.predicted_radar_velocity())
+        guided(health_updates(rio.counters()), self.rejected_in_row)
+            .then(|| rio.predicted_radar_velocity())
     }
 
     /// Counts a change of the filter's counters into the rejection run: an applied update ends
@@ -447,20 +455,21 @@ impl Runner {
     }
 
     fn filter_imu(&mut self, s: ImuSample) {
-        let Some(rio) = self.rio.as_mut() else {
+        if self.rio.is_none() {
             return;
-        };
-        let before = *rio.counters();
-        rio.push_imu(s);
-        let after = *rio.counters();
-        self.track(before, after);
+        }
+        // Rest at the previous sample, decided now that every frame up to it is in (in either
+        // input order), applied before propagating to this one.
         let due = self.rest.push_imu(&s);
-        if self.rest.at_rest(s.t) {
+        if self.rest.resting() {
             self.counters.rest_samples += 1;
         } else {
             self.rest_anchor = None;
         }
-        if let (Some(u), Some(rio)) = (due, self.rio.as_mut()) {
+        let Some(rio) = self.rio.as_mut() else {
+            return;
+        };
+        if let Some(u) = due {
             let c = *self.rest.config();
             rio.zero_velocity(c.zero_velocity_std);
             if u.first || self.rest_anchor.is_none() {
@@ -471,6 +480,10 @@ impl Runner {
             }
             rio.zero_rate(u.mean_gyro, u.span_s, c.zero_rate_std_min);
         }
+        let before = *rio.counters();
+        rio.push_imu(s);
+        let after = *rio.counters();
+        self.track(before, after);
     }
 
     /// The ego-velocity of `dets` guided by `prior` (status counted).
@@ -507,10 +520,12 @@ impl Runner {
     }
 
     /// Ego-velocity of a frame at `t` \[s\] guided by `prior`, pushed into the filter (applied at
-    /// once when the filter is past `t`, else at the first sample at or past it).
+    /// once when the filter is past `t`, else at the first sample at or past it); `behind`: the
+    /// frame came after the first IMU sample at or past it (the runtime order).
     fn radar_update(
         &mut self,
         t: f64,
+        behind: bool,
         dets: &[Detection],
         prior: Option<([f64; 3], [[f64; 3]; 3])>,
     ) {
@@ -529,15 +544,21 @@ impl Runner {
             .iter()
             .filter(|d| d.radial_velocity.abs() <= zero)
             .count();
-        self.rest.push_radar(
-            t,
-            m.map(|m| (m.velocity, m.covariance)),
-            still as f64 / dets.len().max(1) as f64,
-        );
+        let verdict =
+            self.rest
+                .push_radar(t, m.map(|m| (m.velocity, m.covariance)), still, dets.len());
         // At rest the zero-velocity update replaces the frame's: the radar's own estimate is poor
         // where its points do not spread (vertical velocity of a horizontal fan), the rest exact.
-        let m = if self.rest.at_rest(t) {
+        // Rest and stillness as decided at the sample before the last one at or before the frame
+        // (the same in both input orders: the latest decided sample unless the frame is behind
+        // the latest), with the frame's own verdict: a frame that says "moving" is applied, one
+        // that says "still" while the IMU is still starts the rest.
+        let resting = self.rest.resting_before_frame(behind);
+        let still = self.rest.was_still(behind);
+        let m = if verdict != Verdict::Moving && (resting || (still && verdict == Verdict::Still)) {
             self.counters.rest_frames += u64::from(m.is_some());
+            // The frame agrees with the filter (zero velocity): the rejection run ends.
+            self.rejected_in_row = 0;
             None
         } else {
             m
@@ -604,7 +625,7 @@ impl Runner {
                     continue;
                 }
                 let prior = self.current_prior();
-                self.radar_update(e.t, &e.dets, prior);
+                self.radar_update(e.t, false, &e.dets, prior);
             }
             self.filter_imu(*s);
             for e in &early[from..next] {
@@ -618,7 +639,7 @@ impl Runner {
         for e in &early[next..] {
             if self.use_radar {
                 let prior = self.current_prior();
-                self.radar_update(e.t, &e.dets, prior);
+                self.radar_update(e.t, false, &e.dets, prior);
             }
             self.waiting.push_back((e.id, e.t));
         }
