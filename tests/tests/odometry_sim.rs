@@ -68,6 +68,14 @@ fn doppler_rio_beats_dead_reckoning_by_far_on_simulated_walks() {
     }
 }
 
+/// Simulates `sc` into a temporary directory (kept alive by the returned guard) and opens it.
+fn simulated(sc: &Scenario) -> (tempfile::TempDir, Session) {
+    let dir = tempfile::tempdir().unwrap();
+    simulate(sc, dir.path(), &mut |_| {}).expect("simulate");
+    let s = Session::open(dir.path()).unwrap();
+    (dir, s)
+}
+
 /// Doppler RIO over `s` with rest detection on or off.
 fn rio_run(s: &Session, rest: bool) -> milliego_odometry::offline::OfflineResult {
     let mut cfg = OfflineConfig::default();
@@ -96,11 +104,9 @@ fn wander(r: &milliego_odometry::offline::OfflineResult, from: f64, to: f64) -> 
 
 #[test]
 fn a_static_session_drifts_under_a_centimetre() {
-    let dir = tempfile::tempdir().unwrap();
     let mut sc = Scenario::new(Family::Office, MotionKind::Static, 21);
     sc.duration_s = 30.0;
-    simulate(&sc, dir.path(), &mut |_| {}).expect("simulate");
-    let s = Session::open(dir.path()).unwrap();
+    let (_dir, s) = simulated(&sc);
     let on = rio_run(&s, true);
     let off = rio_run(&s, false);
     let (d_on, d_off) = (wander(&on, 0.0, 1e9), wander(&off, 0.0, 1e9));
@@ -122,13 +128,11 @@ fn a_static_session_drifts_under_a_centimetre() {
 fn rests_are_found_only_at_rest_and_hold_the_pose_there() {
     // Rest 8 s, walk, rest 6 s: the ends of the track must not drift, and the walk itself is never
     // taken for rest (the first sample at rest is in the first rest, the last in the last).
-    let dir = tempfile::tempdir().unwrap();
     let mut sc = Scenario::new(Family::Office, MotionKind::Handheld, 8);
     sc.duration_s = 40.0;
     sc.rest_start_s = 8.0;
     sc.rest_end_s = 6.0;
-    simulate(&sc, dir.path(), &mut |_| {}).expect("simulate");
-    let s = Session::open(dir.path()).unwrap();
+    let (_dir, s) = simulated(&sc);
     let on = rio_run(&s, true);
     let off = rio_run(&s, false);
     let gt = s.groundtruth().unwrap().expect("ground truth");
@@ -163,11 +167,9 @@ fn rests_are_found_only_at_rest_and_hold_the_pose_there() {
 #[test]
 fn a_cruising_robot_is_never_taken_for_at_rest() {
     // Smooth planar motion at 0.2-0.6 m/s: the IMU is as still as at rest, the Doppler is not.
-    let dir = tempfile::tempdir().unwrap();
     let mut sc = Scenario::new(Family::Corridor, MotionKind::Robot, 5);
     sc.duration_s = 30.0;
-    simulate(&sc, dir.path(), &mut |_| {}).expect("simulate");
-    let s = Session::open(dir.path()).unwrap();
+    let (_dir, s) = simulated(&sc);
     let on = rio_run(&s, true);
     let off = rio_run(&s, false);
     println!("robot: {} rest samples", on.rest_samples);
