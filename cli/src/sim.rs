@@ -69,6 +69,16 @@ struct RunArgs {
     /// Seconds at rest at the end (the motion ramps down over 1.5 s before).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     rest_end: f64,
+    /// Radar origin in the body frame, X,Y,Z [m] (x forward, y left, z up; each within ±2 m);
+    /// default: the motion's own mount, a few cm ahead.
+    #[arg(long, value_parser = parse_xyz, allow_negative_numbers = true)]
+    radar_lever: Option<[f64; 3]>,
+    /// Radar boresight yawed about body z [deg], ±180 (positive: left).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    radar_yaw: f64,
+    /// Radar boresight tilted up about the radar's x axis [deg], ±60.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    radar_tilt: f64,
 }
 
 #[derive(Debug, Args)]
@@ -83,6 +93,15 @@ struct BenchArgs {
 
 fn parse<T: FromStr<Err = String>>(s: &str) -> std::result::Result<T, String> {
     s.parse()
+}
+
+fn parse_xyz(s: &str) -> std::result::Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e} (expected X,Y,Z in metres)"))?;
+    <[f64; 3]>::try_from(v).map_err(|_| format!("{s:?}: expected three numbers X,Y,Z"))
 }
 
 /// Runs `milliego sim`.
@@ -102,6 +121,9 @@ pub fn run(args: SimArgs) -> Result<()> {
             sc.imu_baud = r.imu_baud;
             sc.rest_start_s = r.rest_start;
             sc.rest_end_s = r.rest_end;
+            sc.radar_lever_m = r.radar_lever;
+            sc.radar_yaw_deg = r.radar_yaw;
+            sc.radar_tilt_deg = r.radar_tilt;
             let s = simulate(&sc, &out, "")?;
             println!("{}", summary_line(&out, &s));
             Ok(())
@@ -201,6 +223,10 @@ mod tests {
         assert!(parse(&["--family", "garage", "-o", "x"]).is_err());
         assert!(parse(&["--motion", "flying", "-o", "x"]).is_err());
         assert!(parse(&["benchmark", "--set", "dev", "-o", "x"]).is_err());
+        assert!(parse(&["--radar-lever", "1,2", "-o", "x"]).is_err());
+        assert!(parse(&["--radar-lever", "1,a,2", "-o", "x"]).is_err());
+        let a = parse(&["--radar-lever", "1.1,0,-0.2", "-o", "x"]).unwrap();
+        assert_eq!(a.run.radar_lever, Some([1.1, 0.0, -0.2]));
         let e = run(parse(&[]).unwrap()).unwrap_err().to_string();
         assert!(e.contains("-o DIR"), "{e}");
         let dir = std::env::temp_dir().join(format!("milliego-sim-cli-{}", std::process::id()));
@@ -212,6 +238,9 @@ mod tests {
                 vec!["--imu-hz", "400", "--imu-baud", "115200", "-o", d],
                 "115200 baud",
             ),
+            (vec!["--radar-lever", "3,0,0", "-o", d], "radar lever arm"),
+            (vec!["--radar-yaw", "-190", "-o", d], "radar yaw"),
+            (vec!["--radar-tilt", "61", "-o", d], "radar tilt"),
         ] {
             let e = run(parse(&args).unwrap()).unwrap_err().to_string();
             assert!(e.contains(what), "{args:?}: {e}");

@@ -66,7 +66,19 @@ pub struct Scenario {
     pub rest_start_s: f64,
     /// Rest after the motion stops, up to the end \[s\] (0: moving to the end).
     pub rest_end_s: f64,
+    /// Radar origin in the body frame \[m\] (`None`: the default mount of [`extrinsics`], a few
+    /// cm ahead of the body origin). Each component within ±[`MAX_LEVER_M`].
+    pub radar_lever_m: Option<[f64; 3]>,
+    /// Radar boresight yawed about the body's z axis \[deg\] (positive: to the left), ±180.
+    pub radar_yaw_deg: f64,
+    /// Radar boresight tilted up about the radar's own x axis \[deg\] (positive: up), ±60.
+    pub radar_tilt_deg: f64,
 }
+
+/// Largest lever-arm component of the radar mount \[m\].
+pub const MAX_LEVER_M: f64 = 2.0;
+/// Largest radar tilt \[deg\] (beyond it the ±20° elevation field of view sees only floor or sky).
+pub const MAX_TILT_DEG: f64 = 60.0;
 
 impl Scenario {
     /// Defaults: 30 s, radar 20 Hz, IMU 200 Hz at 921600 baud, MTi-1 noise.
@@ -82,7 +94,34 @@ impl Scenario {
             imu_spec: ImuSpec::mti1(),
             rest_start_s: 0.0,
             rest_end_s: 0.0,
+            radar_lever_m: None,
+            radar_yaw_deg: 0.0,
+            radar_tilt_deg: 0.0,
         }
+    }
+
+    /// Sensor poses on the body: [`extrinsics`] of the motion kind with the radar mount settings
+    /// (lever arm, yaw, tilt) applied. These are the true poses the simulation uses and the
+    /// session's metadata carries.
+    pub fn extrinsics(&self) -> Extrinsics {
+        let mut ext = extrinsics(self.motion);
+        if let Some(t) = self.radar_lever_m {
+            ext.radar.translation_m = t;
+        }
+        if self.radar_yaw_deg != 0.0 || self.radar_tilt_deg != 0.0 {
+            let (_, q0) = sensor_pose(&ext.radar);
+            let yaw = UnitQuaternion::from_axis_angle(
+                &Vector3::z_axis(),
+                self.radar_yaw_deg.to_radians(),
+            );
+            let tilt = UnitQuaternion::from_axis_angle(
+                &Vector3::x_axis(),
+                self.radar_tilt_deg.to_radians(),
+            );
+            let q = yaw * q0 * tilt;
+            ext.radar.rotation_wxyz = [q.w, q.i, q.j, q.k];
+        }
+        ext
     }
 
     /// Checks the settings, naming the first one out of range.
@@ -116,6 +155,25 @@ impl Scenario {
                 crate::motion::REST_RAMP_S
             ));
         }
+        if let Some(t) = self.radar_lever_m {
+            if !t.iter().all(|x| x.is_finite() && x.abs() <= MAX_LEVER_M) {
+                return bad(format!(
+                    "radar lever arm {t:?} m: each component must be within ±{MAX_LEVER_M} m"
+                ));
+            }
+        }
+        if !(self.radar_yaw_deg.is_finite() && self.radar_yaw_deg.abs() <= 180.0) {
+            return bad(format!(
+                "radar yaw {} deg is outside ±180 deg",
+                self.radar_yaw_deg
+            ));
+        }
+        if !(self.radar_tilt_deg.is_finite() && self.radar_tilt_deg.abs() <= MAX_TILT_DEG) {
+            return bad(format!(
+                "radar tilt {} deg is outside ±{MAX_TILT_DEG} deg",
+                self.radar_tilt_deg
+            ));
+        }
         let need = imu::MESSAGE_LEN as f64 * 10.0 * self.imu_hz;
         if need > 0.9 * f64::from(self.imu_baud) {
             return bad(format!(
@@ -136,8 +194,17 @@ impl Scenario {
         } else {
             String::new()
         };
+        let mut extra = String::new();
+        if self.radar_lever_m.is_some() || self.radar_yaw_deg != 0.0 || self.radar_tilt_deg != 0.0 {
+            let t = self.extrinsics().radar.translation_m;
+            let _ = write!(
+                extra,
+                "; radar mounted at ({}, {}, {}) m, yawed {} deg, tilted up {} deg",
+                t[0], t[1], t[2], self.radar_yaw_deg, self.radar_tilt_deg
+            );
+        }
         format!(
-            "milliego sim {}: {} family, {} motion, seed {}, {} s; radar {} Hz, IMU {} Hz{rest}",
+            "milliego sim {}: {} family, {} motion, seed {}, {} s; radar {} Hz, IMU {} Hz{rest}{extra}",
             env!("CARGO_PKG_VERSION"),
             self.family,
             self.motion,
@@ -149,7 +216,8 @@ impl Scenario {
     }
 }
 
-/// Sensor poses on the body for a motion kind: (radar, IMU), each `p_body = R p_sensor + t`.
+/// The default sensor poses on the body for a motion kind: (radar, IMU), each
+/// `p_body = R p_sensor + t` ([`Scenario::extrinsics`] applies the radar mount settings on top).
 ///
 /// The radar looks along the body's x axis (radar y = body x, radar x = body −y). The IMU sits
 /// beside it, rotated and offset as on the paper's rigs (a board mounted at 90° with a tilt).
@@ -227,7 +295,7 @@ pub fn run(sc: &Scenario, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<S
     let traj = Trajectory::generate(sc.motion, &world, sc.seed, sc.duration_s + GT_TAIL_S)?
         .with_rest(sc.rest_start_s, sc.rest_end_s, sc.duration_s);
     let model = RadarModel::new(sc.radar_hz)?;
-    let ext = extrinsics(sc.motion);
+    let ext = sc.extrinsics();
     let (t_br, q_br) = sensor_pose(&ext.radar);
     let (t_bi, q_bi) = sensor_pose(&ext.imu);
     let (rclk, iclk) = clocks(sc.seed);
