@@ -79,6 +79,9 @@ struct RunArgs {
     /// Radar boresight tilted up about the radar's x axis [deg], ±60.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     radar_tilt: f64,
+    /// Coarse Doppler: radial velocities in multiples of this step [m/s] (0: off; 0.01-2).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    doppler_step: f64,
 }
 
 #[derive(Debug, Args)]
@@ -124,6 +127,7 @@ pub fn run(args: SimArgs) -> Result<()> {
             sc.radar_lever_m = r.radar_lever;
             sc.radar_yaw_deg = r.radar_yaw;
             sc.radar_tilt_deg = r.radar_tilt;
+            sc.doppler_step_mps = r.doppler_step;
             let s = simulate(&sc, &out, "")?;
             println!("{}", summary_line(&out, &s));
             Ok(())
@@ -241,6 +245,7 @@ mod tests {
             (vec!["--radar-lever", "3,0,0", "-o", d], "radar lever arm"),
             (vec!["--radar-yaw", "-190", "-o", d], "radar yaw"),
             (vec!["--radar-tilt", "61", "-o", d], "radar tilt"),
+            (vec!["--doppler-step", "3", "-o", d], "Doppler step"),
         ] {
             let e = run(parse(&args).unwrap()).unwrap_err().to_string();
             assert!(e.contains(what), "{args:?}: {e}");

@@ -145,6 +145,9 @@ pub struct RadarModel {
     pub noise_floor_db: f64,
     /// Ray grid step \[deg\].
     pub ray_step_deg: f64,
+    /// Coarse Doppler: reported radial velocities are multiples of this step \[m/s\] instead of
+    /// the .cfg's Doppler bin (0: off, the bin).
+    pub doppler_step_mps: f64,
 }
 
 impl RadarModel {
@@ -181,6 +184,7 @@ impl RadarModel {
             min_points: 5,
             noise_floor_db: 52.0,
             ray_step_deg: 2.0,
+            doppler_step_mps: 0.0,
         })
     }
 
@@ -197,13 +201,23 @@ impl RadarModel {
 
     /// Doppler standard deviation the points carry: noise and quantisation \[m/s\].
     pub fn doppler_sigma_mps(&self) -> f64 {
-        let q = self.derived.velocity_resolution_mps;
+        let q = if self.doppler_step_mps > 0.0 {
+            self.doppler_step_mps
+        } else {
+            self.derived.velocity_resolution_mps
+        };
         (self.doppler_noise_mps.powi(2) + q * q / 12.0).sqrt()
     }
 
     fn quantise_v(&self, v: f64) -> f64 {
         let q = self.derived.velocity_resolution_mps;
         let vmax = self.derived.max_velocity_mps;
+        if self.doppler_step_mps > 0.0 {
+            // Wrap into ±v_max first, then to the step: the result stays a multiple of it.
+            let step = self.doppler_step_mps;
+            let w = (v + vmax).rem_euclid(2.0 * vmax) - vmax;
+            return (w / step).round() * step;
+        }
         let mut b = (v / q).round() * q;
         while b >= vmax {
             b -= 2.0 * vmax;

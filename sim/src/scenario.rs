@@ -73,6 +73,9 @@ pub struct Scenario {
     pub radar_yaw_deg: f64,
     /// Radar boresight tilted up about the radar's own x axis \[deg\] (positive: up), ±60.
     pub radar_tilt_deg: f64,
+    /// Coarse Doppler: every reported radial velocity is a multiple of this step \[m/s\]
+    /// (0: off, the .cfg's 0.134 m/s bins; else 0.01-2).
+    pub doppler_step_mps: f64,
 }
 
 /// Largest lever-arm component of the radar mount \[m\].
@@ -97,7 +100,15 @@ impl Scenario {
             radar_lever_m: None,
             radar_yaw_deg: 0.0,
             radar_tilt_deg: 0.0,
+            doppler_step_mps: 0.0,
         }
+    }
+
+    /// The radar model these settings give.
+    pub fn radar_model(&self) -> Result<RadarModel, SimError> {
+        let mut m = RadarModel::new(self.radar_hz)?;
+        m.doppler_step_mps = self.doppler_step_mps;
+        Ok(m)
     }
 
     /// Sensor poses on the body: [`extrinsics`] of the motion kind with the radar mount settings
@@ -174,6 +185,12 @@ impl Scenario {
                 self.radar_tilt_deg
             ));
         }
+        if !(self.doppler_step_mps == 0.0 || (0.01..=2.0).contains(&self.doppler_step_mps)) {
+            return bad(format!(
+                "Doppler step {} m/s must be 0 (off) or within 0.01-2 m/s",
+                self.doppler_step_mps
+            ));
+        }
         let need = imu::MESSAGE_LEN as f64 * 10.0 * self.imu_hz;
         if need > 0.9 * f64::from(self.imu_baud) {
             return bad(format!(
@@ -202,6 +219,9 @@ impl Scenario {
                 "; radar mounted at ({}, {}, {}) m, yawed {} deg, tilted up {} deg",
                 t[0], t[1], t[2], self.radar_yaw_deg, self.radar_tilt_deg
             );
+        }
+        if self.doppler_step_mps > 0.0 {
+            let _ = write!(extra, "; Doppler in {} m/s steps", self.doppler_step_mps);
         }
         format!(
             "milliego sim {}: {} family, {} motion, seed {}, {} s; radar {} Hz, IMU {} Hz{rest}{extra}",
@@ -294,7 +314,7 @@ pub fn run(sc: &Scenario, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<S
     let world = World::generate(sc.family, sc.seed);
     let traj = Trajectory::generate(sc.motion, &world, sc.seed, sc.duration_s + GT_TAIL_S)?
         .with_rest(sc.rest_start_s, sc.rest_end_s, sc.duration_s);
-    let model = RadarModel::new(sc.radar_hz)?;
+    let model = sc.radar_model()?;
     let ext = sc.extrinsics();
     let (t_br, q_br) = sensor_pose(&ext.radar);
     let (t_bi, q_bi) = sensor_pose(&ext.imu);
