@@ -213,10 +213,16 @@ impl RadarModel {
         let q = self.derived.velocity_resolution_mps;
         let vmax = self.derived.max_velocity_mps;
         if self.doppler_step_mps > 0.0 {
-            // Wrap into ±v_max first, then to the step: the result stays a multiple of it.
+            // Wrap into ±v_max first, then to the step (towards zero where rounding would pass
+            // v_max, which the driver's plausibility check holds points to): the result stays a
+            // multiple of the step.
             let step = self.doppler_step_mps;
             let w = (v + vmax).rem_euclid(2.0 * vmax) - vmax;
-            return (w / step).round() * step;
+            let mut n = (w / step).round();
+            if (n * step).abs() > vmax {
+                n -= n.signum();
+            }
+            return n * step;
         }
         let mut b = (v / q).round() * q;
         while b >= vmax {
