@@ -82,6 +82,10 @@ struct RunArgs {
     /// Coarse Doppler: radial velocities in multiples of this step [m/s] (0: off; 0.01-2).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     doppler_step: f64,
+    /// Near-field leakage: share of each frame's points that are spurious returns within 1 m at
+    /// zero Doppler (0: off; up to 0.5).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    near_field: f64,
 }
 
 #[derive(Debug, Args)]
@@ -128,6 +132,7 @@ pub fn run(args: SimArgs) -> Result<()> {
             sc.radar_yaw_deg = r.radar_yaw;
             sc.radar_tilt_deg = r.radar_tilt;
             sc.doppler_step_mps = r.doppler_step;
+            sc.near_field_share = r.near_field;
             let s = simulate(&sc, &out, "")?;
             println!("{}", summary_line(&out, &s));
             Ok(())
@@ -246,6 +251,7 @@ mod tests {
             (vec!["--radar-yaw", "-190", "-o", d], "radar yaw"),
             (vec!["--radar-tilt", "61", "-o", d], "radar tilt"),
             (vec!["--doppler-step", "3", "-o", d], "Doppler step"),
+            (vec!["--near-field", "0.7", "-o", d], "near-field share"),
         ] {
             let e = run(parse(&args).unwrap()).unwrap_err().to_string();
             assert!(e.contains(what), "{args:?}: {e}");

@@ -77,6 +77,9 @@ pub enum PointClass {
     Multipath,
     /// A false alarm (noise, clutter).
     Clutter,
+    /// Near-field leakage: a spurious return within 1 m, fixed in the radar frame, zero Doppler
+    /// (TX-RX coupling, the mount's own structure).
+    Leakage,
 }
 
 impl PointClass {
@@ -87,6 +90,7 @@ impl PointClass {
             PointClass::Mirror => "mirror",
             PointClass::Multipath => "multipath",
             PointClass::Clutter => "clutter",
+            PointClass::Leakage => "leakage",
         }
     }
 }
@@ -446,6 +450,63 @@ impl RadarModel {
             .tlv(TlvOut::Stats(stats));
         b.pad_byte = rng.byte();
         b.to_vec()
+    }
+}
+
+/// Near-field leakage: spurious returns at 0.1-1.0 m, fixed in the radar frame, with zero
+/// Doppler (TX-to-RX coupling and reflections off the mount's own structure), added at a share of
+/// each frame's points.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NearField {
+    /// Share of the frame's points that are leakage (0-0.5).
+    pub share: f64,
+    /// Where the spurious returns come from, radar frame \[m\].
+    pub sources: Vec<Vector3<f64>>,
+}
+
+/// Nearest leakage source \[m\].
+pub const NEAR_FIELD_MIN_M: f64 = 0.1;
+/// Farthest leakage source \[m\].
+pub const NEAR_FIELD_MAX_M: f64 = 1.0;
+
+impl NearField {
+    /// 3-8 sources in the field of view at 0.1-1.0 m, drawn from `rng`, for `share`.
+    pub fn new(model: &RadarModel, share: f64, rng: &mut SimRng) -> NearField {
+        let n = 3 + rng.below(6);
+        let sources = (0..n)
+            .map(|_| {
+                let az = rng.uniform(-1.0, 1.0) * model.fov_az_deg.to_radians();
+                let el = rng.uniform(-1.0, 1.0) * model.fov_el_deg.to_radians();
+                dir(az, el) * rng.uniform(NEAR_FIELD_MIN_M, NEAR_FIELD_MAX_M)
+            })
+            .collect();
+        NearField { share, sources }
+    }
+
+    /// Adds leakage to a frame's points so that on average `share` of the result is leakage:
+    /// each other point brings share/(1 − share) leakage points, inserted at random places
+    /// (the frame still holds at most `max_points`).
+    pub fn add(&self, model: &RadarModel, pts: &mut Vec<SimPoint>, rng: &mut SimRng) {
+        if self.sources.is_empty() || self.share <= 0.0 {
+            return;
+        }
+        let share = self.share.min(0.95);
+        let expect = pts.len() as f64 * share / (1.0 - share);
+        let n = (expect + rng.unit()).floor() as usize;
+        for _ in 0..n {
+            let src = self.sources[rng.below(self.sources.len())];
+            let d = src.normalize();
+            let (az, el) = (d.x.atan2(d.y), d.z.asin());
+            let snr = 10f64.powf(rng.uniform(20.0, 35.0) / 10.0);
+            let mut p = model.report(src, 0.0, snr, az, el, PointClass::Leakage, rng);
+            // The DC Doppler bin: exactly zero, whatever the noise.
+            p.v = 0.0;
+            let at = rng.below(pts.len() + 1);
+            pts.insert(at, p);
+        }
+        while pts.len() > model.max_points {
+            pts.swap_remove(rng.below(pts.len()));
+        }
     }
 }
 

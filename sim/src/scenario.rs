@@ -9,7 +9,7 @@
 use crate::clock::{SensorClock, Uart};
 use crate::imu::{self, Imu, ImuSpec, GRAVITY};
 use crate::motion::{MotionKind, Trajectory};
-use crate::radar::{PointClass, RadarModel, CPU_HZ};
+use crate::radar::{NearField, PointClass, RadarModel, CPU_HZ};
 use crate::rng::SimRng;
 use crate::world::{Family, World};
 use crate::SimError;
@@ -76,6 +76,9 @@ pub struct Scenario {
     /// Coarse Doppler: every reported radial velocity is a multiple of this step \[m/s\]
     /// (0: off, the .cfg's 0.134 m/s bins; else 0.01-2).
     pub doppler_step_mps: f64,
+    /// Near-field leakage: share of each frame's points that are spurious returns at 0.1-1.0 m,
+    /// fixed in the radar frame, zero Doppler (0: off; else up to 0.5).
+    pub near_field_share: f64,
 }
 
 /// Largest lever-arm component of the radar mount \[m\].
@@ -101,6 +104,7 @@ impl Scenario {
             radar_yaw_deg: 0.0,
             radar_tilt_deg: 0.0,
             doppler_step_mps: 0.0,
+            near_field_share: 0.0,
         }
     }
 
@@ -191,6 +195,12 @@ impl Scenario {
                 self.doppler_step_mps
             ));
         }
+        if !(0.0..=0.5).contains(&self.near_field_share) {
+            return bad(format!(
+                "near-field share {} is outside 0-0.5",
+                self.near_field_share
+            ));
+        }
         let need = imu::MESSAGE_LEN as f64 * 10.0 * self.imu_hz;
         if need > 0.9 * f64::from(self.imu_baud) {
             return bad(format!(
@@ -222,6 +232,13 @@ impl Scenario {
         }
         if self.doppler_step_mps > 0.0 {
             let _ = write!(extra, "; Doppler in {} m/s steps", self.doppler_step_mps);
+        }
+        if self.near_field_share > 0.0 {
+            let _ = write!(
+                extra,
+                "; near-field leakage {} of the points",
+                self.near_field_share
+            );
         }
         format!(
             "milliego sim {}: {} family, {} motion, seed {}, {} s; radar {} Hz, IMU {} Hz{rest}{extra}",
@@ -352,6 +369,9 @@ pub fn run(sc: &Scenario, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<S
     let mut rs = w.stream(StreamKind::Radar)?;
     let mut rng = SimRng::new(sc.seed, "radar");
     let mut link_rng = SimRng::new(sc.seed, "radar/link");
+    let mut near_rng = SimRng::new(sc.seed, "radar/near-field");
+    let near = (sc.near_field_share > 0.0)
+        .then(|| NearField::new(&model, sc.near_field_share, &mut near_rng));
     let mut uart = Uart::new(model.derived.data_baud, (64, 1024), (0.2e-3, 1.5e-3));
     let mut truth = String::from(
         "# frame,index,class,true_x,true_y,true_z,true_v,x,y,z,v\n# radar frame [m], radial velocity [m/s]\n",
@@ -368,7 +388,10 @@ pub fn run(sc: &Scenario, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<S
         let body = traj.pose(mid);
         let rp = body.compose(&t_br, &q_br);
         let v = traj.point_velocity(mid, &t_br);
-        let pts = model.frame(&world, &rp.p, &rp.q, &v, &mut rng);
+        let mut pts = model.frame(&world, &rp.p, &rp.q, &v, &mut rng);
+        if let Some(nf) = &near {
+            nf.add(&model, &mut pts, &mut near_rng);
+        }
         let proc = RADAR_PROC_S
             + RADAR_PROC_PER_POINT_S * pts.len() as f64
             + link_rng.uniform(0.0, RADAR_JITTER_S);

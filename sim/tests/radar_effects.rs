@@ -55,3 +55,54 @@ fn coarse_doppler_is_a_multiple_of_the_step() {
         assert!(e.contains("Doppler step"), "{e}");
     }
 }
+
+#[test]
+fn near_field_leakage_takes_its_share_within_a_metre_at_zero_doppler() {
+    for share in [0.1, 0.24] {
+        let s = common::simulate_with(Family::Office, MotionKind::Handheld, 12, |s| {
+            s.duration_s = 10.0;
+            s.near_field_share = share;
+        });
+        let (frames, c) = decode_radar(&s.session);
+        assert_eq!(c.frames_bad_total(), 0);
+        let truth = radar_truth(&s.path());
+        let mut rows = truth.iter();
+        let (mut near, mut all, mut labelled) = (0usize, 0usize, 0usize);
+        let mut sources: Vec<nalgebra::Vector3<f64>> = Vec::new();
+        for f in &frames {
+            for p in &f.points {
+                let r = rows.next().unwrap();
+                let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+                all += 1;
+                if range <= 1.0 && p[3] == 0.0 {
+                    near += 1;
+                }
+                if r.class == "leakage" {
+                    labelled += 1;
+                    assert!(range <= 1.05 && p[3] == 0.0 && r.true_v == 0.0, "{r:?}");
+                    if !sources.iter().any(|q| (q - r.true_xyz).norm() < 1e-9) {
+                        sources.push(r.true_xyz);
+                    }
+                }
+            }
+        }
+        let got = near as f64 / all as f64;
+        let lab = labelled as f64 / all as f64;
+        eprintln!(
+            "share {share}: {got:.3} of {all} points within 1 m at zero Doppler, {lab:.3} labelled leakage, {} sources",
+            sources.len()
+        );
+        assert!((got - share).abs() < 0.03, "{got} vs {share}");
+        assert!((lab - share).abs() < 0.03, "{lab} vs {share}");
+        // Fixed in the radar frame: a handful of places, frame after frame.
+        assert!((3..=8).contains(&sources.len()), "{}", sources.len());
+        assert!(s.session.meta.description.contains("near-field leakage"));
+    }
+    let mut sc = Scenario::new(Family::Office, MotionKind::Handheld, 1);
+    sc.near_field_share = 0.6;
+    assert!(sc
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("near-field share"));
+}
