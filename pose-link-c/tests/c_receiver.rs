@@ -67,7 +67,8 @@ fn c_compiler() -> Option<OsString> {
     ok.then_some(cc)
 }
 
-/// Compiles receiver.c into `dir` (warnings are errors) and returns the executable.
+/// Compiles receiver.c into `dir` (warnings are errors) against the static library and returns
+/// the executable.
 fn build_receiver(cc: &OsString, dir: &Path) -> PathBuf {
     let lib = artifact("pose-link-c", "libpose_link_c.a");
     let exe = dir.join("receiver");
@@ -330,6 +331,39 @@ fn c_receiver_reads_a_damaged_serial_stream_through_the_deframer() {
     std::fs::write(&path, &stream).unwrap();
 
     let from_file = run_ok(Command::new(&receiver).arg("serial").arg(&path));
+    // The same through the dynamic library (what C# and Unity load), on Linux.
+    if cfg!(target_os = "linux") {
+        let so = artifact("pose-link-c", "libpose_link_c.so");
+        let lib_dir = so.parent().unwrap();
+        let exe = tmp.path().join("receiver-dyn");
+        let out = Command::new(&cc)
+            .args([
+                "-std=c99",
+                "-D_POSIX_C_SOURCE=200809L",
+                "-Wall",
+                "-Werror",
+                "-I",
+            ])
+            .arg(crate_dir().join("include"))
+            .arg(crate_dir().join("examples/receiver.c"))
+            .arg("-L")
+            .arg(lib_dir)
+            .arg("-lpose_link_c")
+            .arg(format!("-Wl,-rpath,{}", lib_dir.display()))
+            .arg("-o")
+            .arg(&exe)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_eq!(
+            run_ok(Command::new(&exe).arg("serial").arg(&path)),
+            from_file
+        );
+    }
     // The same from stdin.
     let mut child = Command::new(&receiver)
         .args(["serial", "-"])
