@@ -39,7 +39,7 @@ enum SimCmd {
 
 #[derive(Debug, Args)]
 struct RunArgs {
-    /// World family: corridor, office, atrium, store_room, household.
+    /// World family: corridor, office, atrium, store_room, household, outdoor.
     #[arg(long, default_value = "office", value_parser = parse::<Family>)]
     family: Family,
     /// Motion: robot, handheld, headworn, static.

@@ -66,6 +66,22 @@ sensorStart\n"
     )
 }
 
+/// The long-range chirp configuration of outdoor scenes: [`cfg_text`] with a 15 MHz/µs slope
+/// (0.94 GHz sampled: 16 cm range bins, 41 m max range), the same chirp timing (so the same
+/// Doppler bins, ±4.3 m/s) and the CFAR range window opened to 40 m.
+pub fn cfg_text_outdoor(frame_hz: f64) -> String {
+    cfg_text(frame_hz)
+        .replace(
+            "% 60 MHz/us x 62.5 us sampled = 3.75 GHz: 4.0 cm range bins, 10.24 m max range (complex 1x)",
+            "% outdoor: 15 MHz/us x 62.5 us sampled = 0.94 GHz: 16 cm range bins, 40.96 m max range (complex 1x)",
+        )
+        .replace(
+            "profileCfg 0 77 7 3 66.5 0 0 60 1 256 4096 0 0 30",
+            "profileCfg 0 77 7 3 66.5 0 0 15 1 256 4096 0 0 30",
+        )
+        .replace("cfarFovCfg -1 0 0.25 10.0", "cfarFovCfg -1 0 0.25 40.0")
+}
+
 /// Why a point is in the cloud.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum PointClass {
@@ -149,6 +165,8 @@ pub struct RadarModel {
     pub noise_floor_db: f64,
     /// Ray grid step \[deg\].
     pub ray_step_deg: f64,
+    /// Farthest return modelled \[m\] (also capped by the .cfg's maximum range).
+    pub max_range_m: f64,
     /// Coarse Doppler: reported radial velocities are multiples of this step \[m/s\] instead of
     /// the .cfg's Doppler bin (0: off, the bin).
     pub doppler_step_mps: f64,
@@ -157,12 +175,27 @@ pub struct RadarModel {
 impl RadarModel {
     /// The model at `frame_hz` \[Hz\] (10-30).
     pub fn new(frame_hz: f64) -> Result<RadarModel, SimError> {
+        RadarModel::with_cfg(frame_hz, cfg_text)
+    }
+
+    /// The model for open outdoor scenes at `frame_hz` \[Hz\] (10-30): the long-range .cfg
+    /// ([`cfg_text_outdoor`], 40 m), fewer outliers (40 %: no walls to mirror or bounce off)
+    /// and a floor of 3 points per frame instead of 5.
+    pub fn outdoor(frame_hz: f64) -> Result<RadarModel, SimError> {
+        let mut m = RadarModel::with_cfg(frame_hz, cfg_text_outdoor)?;
+        m.max_range_m = 40.0;
+        m.outlier_share = 0.4;
+        m.min_points = 3;
+        Ok(m)
+    }
+
+    fn with_cfg(frame_hz: f64, text: fn(f64) -> String) -> Result<RadarModel, SimError> {
         if !(10.0..=30.0).contains(&frame_hz) {
             return Err(SimError::Config(format!(
                 "radar frame rate {frame_hz} Hz is outside 10-30 Hz"
             )));
         }
-        let cfg = cfg_text(frame_hz);
+        let cfg = text(frame_hz);
         let derived = RadarConfig::parse(&cfg)
             .and_then(|c| c.derive(None))
             .map_err(|e| {
@@ -188,6 +221,7 @@ impl RadarModel {
             min_points: 5,
             noise_floor_db: 52.0,
             ray_step_deg: 2.0,
+            max_range_m: 10.0,
             doppler_step_mps: 0.0,
         })
     }
@@ -260,7 +294,7 @@ impl RadarModel {
     ) -> Vec<SimPoint> {
         let inv = q.inverse();
         let v_r = inv * v_world;
-        let max_r = self.derived.max_range_m.min(10.0);
+        let max_r = self.derived.max_range_m.min(self.max_range_m);
         let thr = 10f64.powf(self.threshold_db / 10.0);
         // (unit ray in radar frame, range, linear SNR)
         let mut cands: Vec<(Vector3<f64>, f64, f64)> = Vec::new();
@@ -529,5 +563,14 @@ mod tests {
             assert!(m.derived.max_points_per_frame as usize >= m.max_points);
         }
         assert!(RadarModel::new(40.0).is_err());
+        let o = RadarModel::outdoor(20.0).unwrap();
+        assert!((o.derived.range_resolution_m - 0.16).abs() < 0.005);
+        assert!(o.derived.max_range_m > 40.0);
+        // Same chirp timing; the lower sampled band's centre moves the bin by ~2 %.
+        let q = RadarModel::new(20.0)
+            .unwrap()
+            .derived
+            .velocity_resolution_mps;
+        assert!((o.derived.velocity_resolution_mps / q - 1.0).abs() < 0.03);
     }
 }

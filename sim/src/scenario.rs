@@ -110,7 +110,11 @@ impl Scenario {
 
     /// The radar model these settings give.
     pub fn radar_model(&self) -> Result<RadarModel, SimError> {
-        let mut m = RadarModel::new(self.radar_hz)?;
+        let mut m = if self.family == Family::Outdoor {
+            RadarModel::outdoor(self.radar_hz)?
+        } else {
+            RadarModel::new(self.radar_hz)?
+        };
         m.doppler_step_mps = self.doppler_step_mps;
         Ok(m)
     }

@@ -25,16 +25,21 @@ pub enum Family {
     StoreRoom,
     /// Apartment: rooms behind partition walls with doors, sofa, bed, wardrobe, kitchen.
     Household,
+    /// Open ground outdoors (a plaza or car park): no ceiling, weak ground returns, a few distant
+    /// scatterers: lamp posts, parked cars, building facades 10-40 m away. Not in the benchmark
+    /// split.
+    Outdoor,
 }
 
 impl Family {
     /// All families.
-    pub const ALL: [Family; 5] = [
+    pub const ALL: [Family; 6] = [
         Family::Corridor,
         Family::Office,
         Family::Atrium,
         Family::StoreRoom,
         Family::Household,
+        Family::Outdoor,
     ];
 
     /// The family's name on the command line and in split tables.
@@ -45,6 +50,7 @@ impl Family {
             Family::Atrium => "atrium",
             Family::StoreRoom => "store_room",
             Family::Household => "household",
+            Family::Outdoor => "outdoor",
         }
     }
 }
@@ -62,7 +68,7 @@ impl FromStr for Family {
             .into_iter()
             .find(|f| f.name() == s)
             .ok_or_else(|| {
-                format!("unknown world family {s:?} (expected corridor, office, atrium, store_room or household)")
+                format!("unknown world family {s:?} (expected corridor, office, atrium, store_room, household or outdoor)")
             })
     }
 }
@@ -396,6 +402,7 @@ impl World {
             Family::Atrium => atrium(&mut b),
             Family::StoreRoom => store_room(&mut b),
             Family::Household => household(&mut b),
+            Family::Outdoor => outdoor(&mut b),
         };
         World {
             family,
@@ -796,6 +803,144 @@ fn household(b: &mut Builder) -> (f64, f64, f64) {
     b.place(kitchen, 0.7, 0.7, 1.8, 1.0, Material::Metal);
     b.place(kitchen, 1.0, 0.8, 0.75, 1.0, Material::Wood);
     (w, d, h)
+}
+
+/// Height of the (absent) sky outdoors: far beyond any radar range \[m\].
+pub const OUTDOOR_SKY_M: f64 = 1000.0;
+
+/// An open plaza or car park, 40-60 x 25-40 m of walkable ground: buildings along two or three
+/// sides 8-15 m beyond its edge (facades 8-20 m high with window-frame scatterers every 2.5-4 m and
+/// strong building corners), a row or two of parked cars, lamp posts every 12-25 m, and sparse weak
+/// ground clutter (kerbs, drains, stones). No ceiling; the ground is the weak floor material.
+fn outdoor(b: &mut Builder) -> (f64, f64, f64) {
+    let w = b.rng.uniform(30.0, 45.0);
+    let d = b.rng.uniform(20.0, 30.0);
+    // Facades: along the far y side always, and along one or both x sides.
+    let sides = 2 + b.rng.below(2);
+    for side in 0..sides {
+        let gap = b.rng.uniform(4.0, 8.0);
+        let depth = 12.0;
+        let top = b.rng.uniform(8.0, 20.0);
+        // (facade line from a to b, the building behind it)
+        let (a, e, min, max) = match side {
+            0 => (
+                [-gap, d + gap],
+                [w + gap, d + gap],
+                [-gap, d + gap, 0.0],
+                [w + gap, d + gap + depth, top],
+            ),
+            1 => (
+                [-gap, -gap],
+                [-gap, d + gap],
+                [-gap - depth, -gap, 0.0],
+                [-gap, d + gap, top],
+            ),
+            _ => (
+                [w + gap, -gap],
+                [w + gap, d + gap],
+                [w + gap, -gap, 0.0],
+                [w + gap + depth, d + gap, top],
+            ),
+        };
+        b.prims.push(Primitive {
+            shape: Shape::Box { min, max },
+            material: Material::Concrete,
+        });
+        for c in [a, e] {
+            for z in [0.5, 3.0] {
+                b.scat.push(Scatterer {
+                    p: Vector3::new(c[0], c[1], z),
+                    rcs: 10.0,
+                });
+            }
+        }
+        let len = (e[0] - a[0]).hypot(e[1] - a[1]);
+        let mut f = b.rng.uniform(1.0, 3.0);
+        while f < len - 1.0 {
+            let p = [
+                a[0] + (e[0] - a[0]) * f / len,
+                a[1] + (e[1] - a[1]) * f / len,
+            ];
+            let mut z = 1.5;
+            while z < top - 1.0 {
+                b.scat.push(Scatterer {
+                    p: Vector3::new(p[0], p[1], z),
+                    rcs: 10f64.powf(b.rng.uniform(-0.3, 0.5)),
+                });
+                z += 3.0;
+            }
+            f += b.rng.uniform(6.0, 10.0);
+        }
+    }
+    // A row of parked cars along one edge.
+    {
+        let y = if b.rng.chance(0.5) {
+            b.rng.uniform(1.5, 4.0)
+        } else {
+            d - 4.5 - b.rng.uniform(1.5, 4.0)
+        };
+        let mut x = b.rng.uniform(2.0, 8.0);
+        while x + 2.0 < w - 2.0 {
+            if b.rng.chance(0.25) {
+                let min = [x, y, 0.0];
+                let max = [x + 1.8, y + 4.5, 1.5];
+                let ok = b
+                    .prims
+                    .iter()
+                    .all(|p| rect_gap(p, [min[0], min[1]], [max[0], max[1]]) >= 1.5);
+                if ok {
+                    b.prims.push(Primitive {
+                        shape: Shape::Box { min, max },
+                        material: Material::Metal,
+                    });
+                    for (cx, cy, z, rcs) in [
+                        (min[0], min[1], 0.5, 0.3),
+                        (max[0], min[1], 0.5, 0.3),
+                        (min[0], max[1], 0.5, 0.3),
+                        (max[0], max[1], 0.5, 0.3),
+                        (min[0], 0.5 * (min[1] + max[1]), 0.7, 1.0),
+                        (max[0], 0.5 * (min[1] + max[1]), 0.7, 1.0),
+                    ] {
+                        b.scat.push(Scatterer {
+                            p: Vector3::new(cx, cy, z),
+                            rcs,
+                        });
+                    }
+                }
+            }
+            x += 2.6;
+        }
+    }
+    // Lamp posts.
+    let sp = b.rng.uniform(12.0, 25.0);
+    let mut x = b.rng.uniform(2.0, sp);
+    while x < w - 1.0 {
+        let (y0, y1) = (b.rng.uniform(1.0, 3.0), d - b.rng.uniform(1.0, 3.0));
+        for y in [y0, y1] {
+            let c = [x, y];
+            let ok = b.prims.iter().all(|p| rect_gap(p, c, c) >= 1.0);
+            if ok {
+                let top = b.rng.uniform(5.0, 8.0);
+                b.pillar(c, 0.08, top, Material::Metal);
+                for (z, rcs) in [(0.5, 0.3), (2.0, 0.2)] {
+                    b.scat.push(Scatterer {
+                        p: Vector3::new(c[0], c[1], z),
+                        rcs,
+                    });
+                }
+            }
+        }
+        x += sp;
+    }
+    // Weak ground clutter, about one per 30 m^2.
+    for _ in 0..(w * d / 30.0) as usize {
+        let p = Vector3::new(b.rng.uniform(0.0, w), b.rng.uniform(0.0, d), 0.02);
+        b.scat.push(Scatterer {
+            p,
+            rcs: b.rng.uniform(0.001, 0.005),
+        });
+    }
+    (w, d, OUTDOOR_SKY_M)
 }
 
 #[cfg(test)]
