@@ -9,6 +9,7 @@
 
 use crate::output;
 use clap::{Args, Subcommand};
+use milliego_sim::imu::ImuGrade;
 use milliego_sim::motion::MotionKind;
 use milliego_sim::scenario::{self, Scenario, Summary};
 use milliego_sim::split::{self, Set};
@@ -57,7 +58,7 @@ struct RunArgs {
     /// Radar frame rate, 10-30 Hz.
     #[arg(long, default_value_t = 20.0)]
     radar_hz: f64,
-    /// IMU output rate, 100-400 Hz.
+    /// IMU output rate, 50-400 Hz.
     #[arg(long, default_value_t = 200.0)]
     imu_hz: f64,
     /// IMU UART rate [bit/s].
@@ -86,6 +87,12 @@ struct RunArgs {
     /// zero Doppler (0: off; up to 0.5).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     near_field: f64,
+    /// IMU noise preset: mti1 (MTi-1 series), mti600 (MTi-600 series), mems (BMI088/ICM class).
+    #[arg(long, default_value = "mti1", value_parser = parse::<ImuGrade>)]
+    imu_grade: ImuGrade,
+    /// Share of IMU messages dropped in bursts, counter and sample time jumping (0: off; up to 0.8).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    imu_gaps: f64,
 }
 
 #[derive(Debug, Args)]
@@ -133,6 +140,8 @@ pub fn run(args: SimArgs) -> Result<()> {
             sc.radar_tilt_deg = r.radar_tilt;
             sc.doppler_step_mps = r.doppler_step;
             sc.near_field_share = r.near_field;
+            sc.imu_spec = r.imu_grade.spec();
+            sc.imu_gap_share = r.imu_gaps;
             let s = simulate(&sc, &out, "")?;
             println!("{}", summary_line(&out, &s));
             Ok(())
@@ -233,6 +242,9 @@ mod tests {
         assert!(parse(&["--motion", "flying", "-o", "x"]).is_err());
         assert!(parse(&["benchmark", "--set", "dev", "-o", "x"]).is_err());
         assert!(parse(&["--radar-lever", "1,2", "-o", "x"]).is_err());
+        assert!(parse(&["--imu-grade", "tactical", "-o", "x"]).is_err());
+        let a = parse(&["--imu-grade", "mems", "-o", "x"]).unwrap();
+        assert_eq!(a.run.imu_grade, ImuGrade::Mems);
         assert!(parse(&["--radar-lever", "1,a,2", "-o", "x"]).is_err());
         let a = parse(&["--radar-lever", "1.1,0,-0.2", "-o", "x"]).unwrap();
         assert_eq!(a.run.radar_lever, Some([1.1, 0.0, -0.2]));
@@ -252,6 +264,8 @@ mod tests {
             (vec!["--radar-tilt", "61", "-o", d], "radar tilt"),
             (vec!["--doppler-step", "3", "-o", d], "Doppler step"),
             (vec!["--near-field", "0.7", "-o", d], "near-field share"),
+            (vec!["--imu-gaps", "0.9", "-o", d], "IMU gap share"),
+            (vec!["--imu-hz", "20", "-o", d], "50-400 Hz"),
         ] {
             let e = run(parse(&args).unwrap()).unwrap_err().to_string();
             assert!(e.contains(what), "{args:?}: {e}");

@@ -90,6 +90,159 @@ impl ImuSpec {
     }
 }
 
+impl ImuSpec {
+    /// Xsens MTi-600 series (MTi-630 class) datasheet figures: gyro 0.007 °/s/√Hz, 8 °/h in-run
+    /// bias stability; accelerometer 60 µg/√Hz, 10 µg in-run bias stability. Random walks and
+    /// turn-on biases are assumptions, smaller than the MTi-1's (see docs/simulator.md).
+    pub fn mti600() -> ImuSpec {
+        let deg = std::f64::consts::PI / 180.0;
+        let ug = GRAVITY * 1e-6;
+        ImuSpec {
+            gyro: NoiseSpec {
+                white: 0.007 * deg,
+                bias_sigma: 8.0 / 3600.0 * deg,
+                bias_tau_s: 100.0,
+                random_walk: 1e-5 * deg,
+                turn_on: 0.03 * deg,
+            },
+            accel: NoiseSpec {
+                white: 60.0 * ug,
+                bias_sigma: 10.0 * ug,
+                bias_tau_s: 100.0,
+                random_walk: 1.0 * ug,
+                turn_on: 1000.0 * ug,
+            },
+        }
+    }
+
+    /// A consumer MEMS IMU (Bosch BMI088 / TDK ICM-class): gyro 0.014 °/s/√Hz (BMI088), zero-rate
+    /// offset ±1 °/s taken as 0.5 °/s 1 σ; accelerometer 175 µg/√Hz (BMI088), zero-g offset
+    /// ±20 mg taken as 10 mg 1 σ; bias instability 20 °/h and 100 µg and the random walks are
+    /// assumptions typical of such parts' Allan curves (the datasheets do not give them).
+    pub fn mems() -> ImuSpec {
+        let deg = std::f64::consts::PI / 180.0;
+        let ug = GRAVITY * 1e-6;
+        ImuSpec {
+            gyro: NoiseSpec {
+                white: 0.014 * deg,
+                bias_sigma: 20.0 / 3600.0 * deg,
+                bias_tau_s: 100.0,
+                random_walk: 1e-4 * deg,
+                turn_on: 0.5 * deg,
+            },
+            accel: NoiseSpec {
+                white: 175.0 * ug,
+                bias_sigma: 100.0 * ug,
+                bias_tau_s: 100.0,
+                random_walk: 10.0 * ug,
+                turn_on: 10_000.0 * ug,
+            },
+        }
+    }
+}
+
+/// IMU presets by name: noise and the device named in the session's metadata.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ImuGrade {
+    /// Xsens MTi-1 series (the default): [`ImuSpec::mti1`].
+    Mti1,
+    /// Xsens MTi-600 series: [`ImuSpec::mti600`].
+    Mti600,
+    /// Consumer MEMS (BMI088 / ICM class): [`ImuSpec::mems`].
+    Mems,
+}
+
+impl ImuGrade {
+    /// All grades.
+    pub const ALL: [ImuGrade; 3] = [ImuGrade::Mti1, ImuGrade::Mti600, ImuGrade::Mems];
+
+    /// Name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            ImuGrade::Mti1 => "mti1",
+            ImuGrade::Mti600 => "mti600",
+            ImuGrade::Mems => "mems",
+        }
+    }
+
+    /// The noise of this grade.
+    pub fn spec(self) -> ImuSpec {
+        match self {
+            ImuGrade::Mti1 => ImuSpec::mti1(),
+            ImuGrade::Mti600 => ImuSpec::mti600(),
+            ImuGrade::Mems => ImuSpec::mems(),
+        }
+    }
+
+    /// The device written to the session's metadata.
+    pub fn device(self) -> &'static str {
+        match self {
+            ImuGrade::Mti1 => "MTi-1 (simulated)",
+            ImuGrade::Mti600 => "MTi-630 (simulated)",
+            ImuGrade::Mems => "BMI088-class MEMS IMU (simulated, MTData2 stream)",
+        }
+    }
+
+    /// The grade whose noise `spec` is, if any.
+    pub fn of(spec: &ImuSpec) -> Option<ImuGrade> {
+        ImuGrade::ALL.into_iter().find(|g| g.spec() == *spec)
+    }
+}
+
+impl std::fmt::Display for ImuGrade {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for ImuGrade {
+    type Err = String;
+    fn from_str(s: &str) -> Result<ImuGrade, String> {
+        ImuGrade::ALL
+            .into_iter()
+            .find(|g| g.name() == s)
+            .ok_or_else(|| format!("unknown IMU grade {s:?} (expected mti1, mti600 or mems)"))
+    }
+}
+
+/// Dropped IMU messages: bursts that start and end at random (a two-state Markov chain, mean
+/// burst [`GAP_BURST_S`]), so that on average `share` of the samples are never sent.
+#[derive(Debug, Clone)]
+pub struct Gaps {
+    enter: f64,
+    leave: f64,
+    in_gap: bool,
+    rng: SimRng,
+}
+
+/// Mean length of a burst of dropped IMU messages \[s\].
+pub const GAP_BURST_S: f64 = 0.05;
+
+impl Gaps {
+    /// Gaps of mean share `share` (0-0.8) at `rate_hz` \[Hz\], drawn from `rng`.
+    pub fn new(share: f64, rate_hz: f64, rng: SimRng) -> Gaps {
+        let len = (GAP_BURST_S * rate_hz).max(1.0);
+        let leave = 1.0 / len;
+        Gaps {
+            enter: share / (1.0 - share) * leave,
+            leave,
+            in_gap: false,
+            rng,
+        }
+    }
+
+    /// True when the next sample is dropped.
+    pub fn drop_next(&mut self) -> bool {
+        let p = if self.in_gap {
+            1.0 - self.leave
+        } else {
+            self.enter
+        };
+        self.in_gap = self.rng.chance(p);
+        self.in_gap
+    }
+}
+
 /// The evolving errors of one triad.
 #[derive(Debug, Clone)]
 struct TriadState {

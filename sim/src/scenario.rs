@@ -7,7 +7,7 @@
 //! UART 1 ms later. Host read chunks are timed when their last byte arrived plus the USB latency.
 
 use crate::clock::{SensorClock, Uart};
-use crate::imu::{self, Imu, ImuSpec, GRAVITY};
+use crate::imu::{self, Gaps, Imu, ImuGrade, ImuSpec, GRAVITY};
 use crate::motion::{MotionKind, Trajectory};
 use crate::radar::{NearField, PointClass, RadarModel, CPU_HZ};
 use crate::rng::SimRng;
@@ -56,11 +56,11 @@ pub struct Scenario {
     pub duration_s: f64,
     /// Radar frame rate \[Hz\] (10-30).
     pub radar_hz: f64,
-    /// IMU output rate \[Hz\] (100-400).
+    /// IMU output rate \[Hz\] (50-400).
     pub imu_hz: f64,
     /// IMU UART rate \[bit/s\].
     pub imu_baud: u32,
-    /// IMU noise.
+    /// IMU noise ([`ImuGrade::spec`] gives the presets; default MTi-1).
     pub imu_spec: ImuSpec,
     /// Rest before the motion starts \[s\] (0: moving from the first sample).
     pub rest_start_s: f64,
@@ -79,6 +79,9 @@ pub struct Scenario {
     /// Near-field leakage: share of each frame's points that are spurious returns at 0.1-1.0 m,
     /// fixed in the radar frame, zero Doppler (0: off; else up to 0.5).
     pub near_field_share: f64,
+    /// Share of IMU samples dropped in bursts: the message is never sent, so PacketCounter and
+    /// SampleTimeFine jump over the gap (0: off; else up to 0.8).
+    pub imu_gap_share: f64,
 }
 
 /// Largest lever-arm component of the radar mount \[m\].
@@ -105,6 +108,7 @@ impl Scenario {
             radar_tilt_deg: 0.0,
             doppler_step_mps: 0.0,
             near_field_share: 0.0,
+            imu_gap_share: 0.0,
         }
     }
 
@@ -152,8 +156,14 @@ impl Scenario {
                 self.duration_s
             ));
         }
-        if !(100.0..=400.0).contains(&self.imu_hz) {
-            return bad(format!("IMU rate {} Hz is outside 100-400 Hz", self.imu_hz));
+        if !(50.0..=400.0).contains(&self.imu_hz) {
+            return bad(format!("IMU rate {} Hz is outside 50-400 Hz", self.imu_hz));
+        }
+        if !(0.0..=0.8).contains(&self.imu_gap_share) {
+            return bad(format!(
+                "IMU gap share {} is outside 0-0.8",
+                self.imu_gap_share
+            ));
         }
         let rests = self.rest_start_s + self.rest_end_s;
         if !(self.rest_start_s >= 0.0 && self.rest_end_s >= 0.0 && rests.is_finite()) {
@@ -236,6 +246,20 @@ impl Scenario {
         }
         if self.doppler_step_mps > 0.0 {
             let _ = write!(extra, "; Doppler in {} m/s steps", self.doppler_step_mps);
+        }
+        match ImuGrade::of(&self.imu_spec) {
+            Some(ImuGrade::Mti1) => {}
+            Some(g) => {
+                let _ = write!(extra, "; IMU grade {g}");
+            }
+            None => extra.push_str("; custom IMU noise"),
+        }
+        if self.imu_gap_share > 0.0 {
+            let _ = write!(
+                extra,
+                "; {} of the IMU samples dropped in bursts",
+                self.imu_gap_share
+            );
         }
         if self.near_field_share > 0.0 {
             let _ = write!(
@@ -350,7 +374,12 @@ pub fn run(sc: &Scenario, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<S
     });
     meta.imu = Some(ImuMeta {
         baud: sc.imu_baud,
-        device: Some("MTi-1 (simulated)".into()),
+        device: Some(
+            ImuGrade::of(&sc.imu_spec)
+                .unwrap_or(ImuGrade::Mti1)
+                .device()
+                .into(),
+        ),
         sample_time_wrap: "u32".into(),
         rate_hz: Some(sc.imu_hz),
         ..ImuMeta::default()
@@ -457,6 +486,13 @@ pub fn run(sc: &Scenario, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<S
     let dt = 1.0 / sc.imu_hz;
     let s0 = iclk.to_sensor(IMU_START_S);
     let g = Vector3::new(0.0, 0.0, -GRAVITY);
+    let mut gaps = (sc.imu_gap_share > 0.0).then(|| {
+        Gaps::new(
+            sc.imu_gap_share,
+            sc.imu_hz,
+            SimRng::new(sc.seed, "imu/gaps"),
+        )
+    });
     for k in 0u64.. {
         let ts = s0 + k as f64 * dt;
         let th = iclk.to_host(ts);
@@ -468,6 +504,10 @@ pub fn run(sc: &Scenario, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<S
         let f = q_wi.inverse() * (a - g);
         let wv = traj.angular_velocity(th, &q_bi);
         let s = dev.sample(f, wv, dt);
+        if gaps.as_mut().is_some_and(|g| g.drop_next()) {
+            // Measured (the noise processes run on) but never sent.
+            continue;
+        }
         let stf = ((ts * 1e4).round() as u64 % (1u64 << 32)) as u32;
         let bytes = imu::encode(k as u16, stf, &s);
         let (_, reads) = uart.send(th + IMU_LATENCY_S, bytes.len(), &mut link_rng);
