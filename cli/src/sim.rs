@@ -93,6 +93,9 @@ struct RunArgs {
     /// Share of IMU messages dropped in bursts, counter and sample time jumping (0: off; up to 0.8).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     imu_gaps: f64,
+    /// Barometer rate [Hz]: BaroPressure messages in the IMU stream (0: off; 1-100, e.g. 50).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    baro_hz: f64,
 }
 
 #[derive(Debug, Args)]
@@ -142,6 +145,7 @@ pub fn run(args: SimArgs) -> Result<()> {
             sc.near_field_share = r.near_field;
             sc.imu_spec = r.imu_grade.spec();
             sc.imu_gap_share = r.imu_gaps;
+            sc.baro_hz = r.baro_hz;
             let s = simulate(&sc, &out, "")?;
             println!("{}", summary_line(&out, &s));
             Ok(())
@@ -265,6 +269,7 @@ mod tests {
             (vec!["--doppler-step", "3", "-o", d], "Doppler step"),
             (vec!["--near-field", "0.7", "-o", d], "near-field share"),
             (vec!["--imu-gaps", "0.9", "-o", d], "IMU gap share"),
+            (vec!["--baro-hz", "500", "-o", d], "barometer rate"),
             (vec!["--imu-hz", "20", "-o", d], "50-400 Hz"),
         ] {
             let e = run(parse(&args).unwrap()).unwrap_err().to_string();

@@ -359,6 +359,98 @@ pub fn encode(counter: u16, sample_time_fine: u32, s: &ImuSample) -> Vec<u8> {
     buf[..n].to_vec()
 }
 
+/// BaroPressure data id (u32, Pa).
+pub const ID_BARO_PRESSURE: DataId = DataId(0x3010);
+
+/// Encodes one pressure message as an MTi-100-class device sends it at its own rate:
+/// PacketCounter, SampleTimeFine, BaroPressure (u32 \[Pa\]; `pa` rounded, clamped to u32).
+pub fn encode_pressure(counter: u16, sample_time_fine: u32, pa: f64) -> Vec<u8> {
+    let mut buf = [0u8; 32];
+    let mut w = MtData2Writer::new(&mut buf);
+    let pa = pa.round().clamp(0.0, f64::from(u32::MAX)) as u32;
+    let items = [
+        (ID_PACKET_COUNTER, Value::PacketCounter(counter)),
+        (ID_SAMPLE_TIME_FINE, Value::SampleTimeFine(sample_time_fine)),
+        (ID_BARO_PRESSURE, Value::BaroPressure(pa)),
+    ];
+    for (id, v) in &items {
+        // 19 B of payload: these cannot fail.
+        let _ = w.value(*id, v);
+    }
+    let n = w.finish(BID_MASTER).unwrap_or(0);
+    buf[..n].to_vec()
+}
+
+/// Bytes of one encoded pressure message \[B\].
+pub const PRESSURE_MESSAGE_LEN: usize = 4 + (3 + 2) + (3 + 4) + (3 + 4) + 1;
+
+/// Standard-atmosphere pressure at altitude `h` \[m\] \[Pa\]:
+/// p = 101325 (1 − 2.25577e-5 h)^5.25588.
+pub fn standard_pressure(h: f64) -> f64 {
+    101_325.0 * (1.0 - 2.25577e-5 * h).powf(5.25588)
+}
+
+/// Altitude of standard-atmosphere pressure `pa` \[Pa\] \[m\] (inverse of [`standard_pressure`]).
+pub fn standard_altitude(pa: f64) -> f64 {
+    (1.0 - (pa / 101_325.0).powf(1.0 / 5.25588)) / 2.25577e-5
+}
+
+/// Barometer white noise, 1 σ \[Pa\] (~0.1 m).
+pub const BARO_NOISE_PA: f64 = 1.2;
+/// Barometer bias random walk \[Pa/√s\] (weather and temperature drift).
+pub const BARO_BIAS_WALK_PA: f64 = 0.1;
+/// Start altitudes are drawn uniformly from 0 to this \[m\].
+pub const BARO_MAX_START_ALTITUDE_M: f64 = 500.0;
+
+/// A barometer at the IMU's origin: standard atmosphere from the true altitude, a random start
+/// altitude, white noise, a bias random walk, whole pascals.
+#[derive(Debug, Clone)]
+pub struct Baro {
+    /// Altitude of the world's z = 0 \[m\].
+    pub start_altitude_m: f64,
+    bias_pa: f64,
+    rng: SimRng,
+}
+
+/// One barometer sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BaroSample {
+    /// Reported pressure \[Pa\] (whole pascals).
+    pub pa: f64,
+    /// Noise-free, bias-free pressure at the true altitude \[Pa\].
+    pub true_pa: f64,
+    /// Bias at this sample \[Pa\].
+    pub bias_pa: f64,
+    /// True altitude \[m\].
+    pub altitude_m: f64,
+}
+
+impl Baro {
+    /// A barometer whose start altitude comes from `rng` (its own stream).
+    pub fn new(mut rng: SimRng) -> Baro {
+        Baro {
+            start_altitude_m: rng.uniform(0.0, BARO_MAX_START_ALTITUDE_M),
+            bias_pa: 0.0,
+            rng,
+        }
+    }
+
+    /// Measures at world height `z` \[m\]; `dt` \[s\] is the sample interval (steps the bias).
+    pub fn sample(&mut self, z: f64, dt: f64) -> BaroSample {
+        let altitude_m = self.start_altitude_m + z;
+        let true_pa = standard_pressure(altitude_m);
+        let bias_pa = self.bias_pa;
+        let pa = (true_pa + bias_pa + BARO_NOISE_PA * self.rng.normal()).round();
+        self.bias_pa += BARO_BIAS_WALK_PA * dt.sqrt() * self.rng.normal();
+        BaroSample {
+            pa,
+            true_pa,
+            bias_pa,
+            altitude_m,
+        }
+    }
+}
+
 /// Bytes of one encoded message \[B\].
 pub const MESSAGE_LEN: usize = 4 + (3 + 2) + (3 + 4) + (3 + 12) + (3 + 12) + (3 + 4) + 1;
 
@@ -388,6 +480,31 @@ mod tests {
         assert_eq!(smp.packet_counter, Some(65535));
         assert_eq!(smp.sample_time_fine, Some(123_456));
         assert!((smp.acceleration.unwrap()[2] - 9.8).abs() < 1e-5);
+    }
+
+    #[test]
+    fn pressure_message_decodes_and_atmosphere_inverts() {
+        let m = encode_pressure(7, 99, 95_461.4);
+        assert_eq!(m.len(), PRESSURE_MESSAGE_LEN);
+        let mut f = imu_driver::DeviceFramer::new();
+        let mut input = &m[..];
+        let imu_driver::Poll::Frame(frame) = f.poll(&mut input) else {
+            panic!("no frame")
+        };
+        let Ok(imu_driver::Message::MtData2(d)) = imu_driver::Message::decode(&frame) else {
+            panic!("not MTData2")
+        };
+        let smp = d.sample();
+        assert_eq!(smp.packet_counter, Some(7));
+        assert_eq!(smp.sample_time_fine, Some(99));
+        assert!(smp.acceleration.is_none());
+        assert!(d
+            .items()
+            .any(|i| matches!(i.and_then(|i| i.value()), Ok(Value::BaroPressure(95_461)))));
+        assert!((standard_pressure(0.0) - 101_325.0).abs() < 1e-9);
+        assert!((standard_altitude(standard_pressure(432.1)) - 432.1).abs() < 1e-6);
+        // About 12 Pa per metre near sea level.
+        assert!((standard_pressure(0.0) - standard_pressure(1.0) - 12.0).abs() < 0.2);
     }
 
     #[test]

@@ -7,7 +7,7 @@
 //! UART 1 ms later. Host read chunks are timed when their last byte arrived plus the USB latency.
 
 use crate::clock::{SensorClock, Uart};
-use crate::imu::{self, Gaps, Imu, ImuGrade, ImuSpec, GRAVITY};
+use crate::imu::{self, Baro, Gaps, Imu, ImuGrade, ImuSpec, GRAVITY};
 use crate::motion::{MotionKind, Trajectory};
 use crate::radar::{NearField, PointClass, RadarModel, CPU_HZ};
 use crate::rng::SimRng;
@@ -42,6 +42,8 @@ pub const IMU_LATENCY_S: f64 = 1e-3;
 pub const RADAR_TRUTH_FILE: &str = "radar_truth.csv";
 /// Ground-truth file of the IMU biases.
 pub const IMU_TRUTH_FILE: &str = "imu_truth.csv";
+/// Ground-truth file of the barometer (only with the barometer on).
+pub const BARO_TRUTH_FILE: &str = "baro_truth.csv";
 
 /// What to simulate.
 #[derive(Debug, Clone, PartialEq)]
@@ -82,6 +84,8 @@ pub struct Scenario {
     /// Share of IMU samples dropped in bursts: the message is never sent, so PacketCounter and
     /// SampleTimeFine jump over the gap (0: off; else up to 0.8).
     pub imu_gap_share: f64,
+    /// Barometer rate \[Hz\]: pressure messages in the IMU stream (0: off; else 1-100).
+    pub baro_hz: f64,
 }
 
 /// Largest lever-arm component of the radar mount \[m\].
@@ -109,6 +113,7 @@ impl Scenario {
             doppler_step_mps: 0.0,
             near_field_share: 0.0,
             imu_gap_share: 0.0,
+            baro_hz: 0.0,
         }
     }
 
@@ -215,11 +220,24 @@ impl Scenario {
                 self.near_field_share
             ));
         }
+        if !(self.baro_hz == 0.0 || (1.0..=100.0).contains(&self.baro_hz)) {
+            return bad(format!(
+                "barometer rate {} Hz must be 0 (off) or within 1-100 Hz",
+                self.baro_hz
+            ));
+        }
         let need = imu::MESSAGE_LEN as f64 * 10.0 * self.imu_hz;
         if need > 0.9 * f64::from(self.imu_baud) {
             return bad(format!(
                 "IMU at {} Hz needs {need:.0} bit/s, more than 90 % of {} baud",
                 self.imu_hz, self.imu_baud
+            ));
+        }
+        let need = need + imu::PRESSURE_MESSAGE_LEN as f64 * 10.0 * self.baro_hz;
+        if need > 0.9 * f64::from(self.imu_baud) {
+            return bad(format!(
+                "IMU at {} Hz with the barometer at {} Hz needs {need:.0} bit/s, more than 90 % of {} baud",
+                self.imu_hz, self.baro_hz, self.imu_baud
             ));
         }
         RadarModel::new(self.radar_hz).map(|_| ())
@@ -260,6 +278,9 @@ impl Scenario {
                 "; {} of the IMU samples dropped in bursts",
                 self.imu_gap_share
             );
+        }
+        if self.baro_hz > 0.0 {
+            let _ = write!(extra, "; barometer {} Hz", self.baro_hz);
         }
         if self.near_field_share > 0.0 {
             let _ = write!(
@@ -493,11 +514,49 @@ pub fn run(sc: &Scenario, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<S
             SimRng::new(sc.seed, "imu/gaps"),
         )
     });
+    let mut baro = (sc.baro_hz > 0.0).then(|| Baro::new(SimRng::new(sc.seed, "baro")));
+    let mut btruth = baro.as_ref().map(|b| {
+        format!(
+            "# t_host[s],altitude[m],true_pressure[Pa],pressure_bias[Pa]\n# barometer at the IMU origin; altitude = start altitude {:.6} m + world z\n",
+            b.start_altitude_m
+        )
+    });
+    // Messages before this IMU sample that were not IMU samples (pressure): every message, sent
+    // or dropped, takes the next PacketCounter value.
+    let mut extra = 0u64;
+    let mut baro_j = 0u64;
     for k in 0u64.. {
         let ts = s0 + k as f64 * dt;
         let th = iclk.to_host(ts);
         if th >= sc.duration_s {
             break;
+        }
+        if let (Some(b), Some(bt)) = (baro.as_mut(), btruth.as_mut()) {
+            let bdt = 1.0 / sc.baro_hz;
+            loop {
+                let tb = s0 + baro_j as f64 * bdt;
+                if tb > ts {
+                    break;
+                }
+                let thb = iclk.to_host(tb);
+                let z = traj.pose(thb).compose(&t_bi, &q_bi).p.z;
+                let m = b.sample(z, bdt);
+                let stf = ((tb * 1e4).round() as u64 % (1u64 << 32)) as u32;
+                let bytes = imu::encode_pressure((k + extra) as u16, stf, m.pa);
+                let (_, reads) = uart.send(thb + IMU_LATENCY_S, bytes.len(), &mut link_rng);
+                let mut at = 0;
+                for r in reads {
+                    is.write_chunk(r.host_ns, &bytes[at..at + r.len])?;
+                    at += r.len;
+                }
+                let _ = writeln!(
+                    bt,
+                    "{thb:.9},{:.6},{:.6},{:.6}",
+                    m.altitude_m, m.true_pa, m.bias_pa
+                );
+                baro_j += 1;
+                extra += 1;
+            }
         }
         let q_wi = traj.pose(th).q * q_bi;
         let a = traj.point_acceleration(th, &t_bi);
@@ -509,7 +568,7 @@ pub fn run(sc: &Scenario, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<S
             continue;
         }
         let stf = ((ts * 1e4).round() as u64 % (1u64 << 32)) as u32;
-        let bytes = imu::encode(k as u16, stf, &s);
+        let bytes = imu::encode((k + extra) as u16, stf, &s);
         let (_, reads) = uart.send(th + IMU_LATENCY_S, bytes.len(), &mut link_rng);
         let mut at = 0;
         for r in reads {
@@ -533,6 +592,9 @@ pub fn run(sc: &Scenario, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<S
     }
     sum.imu_bytes = is.finish()?;
     write_file(dir, IMU_TRUTH_FILE, &itruth)?;
+    if let Some(bt) = &btruth {
+        write_file(dir, BARO_TRUTH_FILE, bt)?;
+    }
 
     // Ground truth.
     let n = ((sc.duration_s + GT_TAIL_S) * GT_HZ).floor() as usize;

@@ -113,3 +113,84 @@ fn fifty_hertz_streams_decode() {
     sc.imu_hz = 40.0;
     assert!(sc.validate().unwrap_err().to_string().contains("50-400 Hz"));
 }
+
+#[test]
+fn barometer_reads_the_true_height_through_the_standard_atmosphere() {
+    use milliego_sim::imu::{standard_altitude, standard_pressure, BARO_NOISE_PA};
+    let s = common::simulate_with(Family::Office, MotionKind::Handheld, 6, |s| {
+        s.duration_s = 30.0;
+        s.baro_hz = 50.0;
+    });
+    assert!(s.session.meta.description.contains("barometer 50 Hz"));
+    let (all, baro) = common::decode_imu_all(&s.session);
+    let (imu, bad) = decode_imu(&s.session);
+    assert_eq!(bad, 0);
+    assert_eq!(all.len(), imu.len() + baro.len());
+    // One PacketCounter sequence over IMU and pressure messages, as the device sends them.
+    for w in all.windows(2) {
+        assert_eq!(w[1].0, w[0].0.wrapping_add(1), "counter skips");
+        assert!(w[1].1 >= w[0].1, "sample time goes back");
+    }
+    let rate = (baro.len() - 1) as f64 / (f64::from(baro.last().unwrap().stf - baro[0].stf) * 1e-4);
+    assert!((rate - 50.0).abs() < 0.01, "{rate} Hz");
+    // The start altitude from the truth file's header; the bias per row.
+    let text = std::fs::read_to_string(s.path().join("baro_truth.csv")).unwrap();
+    let h0: f64 = text
+        .lines()
+        .find_map(|l| l.split("start altitude ").nth(1))
+        .and_then(|r| r.split(' ').next())
+        .unwrap()
+        .parse()
+        .unwrap();
+    let bias: Vec<f64> = text
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(',').nth(3).unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(bias.len(), baro.len());
+    let gt = common::Gt::load(&s.session);
+    let (t_bi, _) = milliego_sim::scenario::sensor_pose(&s.session.meta.extrinsics.imu);
+    let clk = s.session.meta.clock.unwrap();
+    let (mut res_pa, mut res_m) = (Vec::new(), Vec::new());
+    for (m, b) in baro.iter().zip(&bias) {
+        let th = (f64::from(m.stf) * 1e-4 - clk.imu_offset_s) / (1.0 + clk.imu_drift_ppm * 1e-6);
+        let z = gt.p(th, &t_bi).z;
+        res_pa.push(f64::from(m.pa) - b - standard_pressure(h0 + z));
+        res_m.push(standard_altitude(f64::from(m.pa) - b) - h0 - z);
+    }
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let mean = res_pa.iter().sum::<f64>() / res_pa.len() as f64;
+    let expect = (BARO_NOISE_PA.powi(2) + 1.0 / 12.0).sqrt();
+    eprintln!(
+        "{} pressure samples, h0 {h0:.1} m: residual mean {mean:.3} Pa, rms {:.3} Pa (expected {expect:.3}), height rms {:.3} m",
+        baro.len(),
+        rms(&res_pa),
+        rms(&res_m)
+    );
+    assert!(mean.abs() < 0.2, "mean {mean} Pa");
+    assert!(
+        (rms(&res_pa) / expect - 1.0).abs() < 0.15,
+        "rms {} Pa",
+        rms(&res_pa)
+    );
+    assert!(rms(&res_m) < 0.15, "height rms {} m", rms(&res_m));
+    let mut sc = Scenario::new(Family::Office, MotionKind::Handheld, 1);
+    sc.baro_hz = 200.0;
+    assert!(sc
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("barometer rate"));
+    sc.baro_hz = 100.0;
+    sc.imu_hz = 370.0;
+    sc.imu_baud = 230_400;
+    assert!(sc.validate().is_err());
+    sc.baro_hz = 0.0;
+    assert!(sc.validate().is_ok());
+    sc.baro_hz = 100.0;
+    assert!(sc
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("barometer at 100 Hz"));
+}

@@ -135,6 +135,7 @@ pub fn decode_imu(s: &Session) -> (Vec<ImuMsg>, u64) {
         loop {
             match framer.poll(&mut input) {
                 imu_driver::Poll::Frame(f) => match imu_driver::Message::decode(&f) {
+                    Ok(imu_driver::Message::MtData2(d)) if pressure_of(&d).is_some() => {}
                     Ok(imu_driver::Message::MtData2(d)) => {
                         let s = d.sample();
                         let v = |a: Option<[f64; 3]>| Vector3::from(a.expect("item"));
@@ -158,6 +159,59 @@ pub fn decode_imu(s: &Session) -> (Vec<ImuMsg>, u64) {
         out,
         framer.counters().frames_bad.total() + framer.counters().bytes_skipped + other,
     )
+}
+
+fn pressure_of(d: &imu_driver::MtData2<'_>) -> Option<u32> {
+    d.items().find_map(|i| match i.and_then(|i| i.value()) {
+        Ok(imu_driver::Value::BaroPressure(p)) => Some(p),
+        _ => None,
+    })
+}
+
+/// One decoded pressure message.
+#[derive(Debug, Clone, Copy)]
+pub struct PressureMsg {
+    pub host_ns: u64,
+    pub counter: u16,
+    pub stf: u32,
+    pub pa: u32,
+}
+
+/// Every MTData2 message of the IMU stream in stream order as (counter, SampleTimeFine), and the
+/// pressure messages among them.
+pub fn decode_imu_all(s: &Session) -> (Vec<(u16, u32)>, Vec<PressureMsg>) {
+    let stream = s.imu.as_ref().expect("imu stream");
+    let bytes = stream.read_all().unwrap();
+    let mut framer = imu_driver::LogFramer::new();
+    let (mut all, mut baro) = (Vec::new(), Vec::new());
+    for c in stream.chunks() {
+        let mut input = &bytes[c.start as usize..c.end as usize];
+        loop {
+            match framer.poll(&mut input) {
+                imu_driver::Poll::Frame(f) => {
+                    if let Ok(imu_driver::Message::MtData2(d)) = imu_driver::Message::decode(&f) {
+                        let smp = d.sample();
+                        let (counter, stf) = (
+                            smp.packet_counter.expect("counter"),
+                            smp.sample_time_fine.expect("sample time"),
+                        );
+                        all.push((counter, stf));
+                        if let Some(pa) = pressure_of(&d) {
+                            baro.push(PressureMsg {
+                                host_ns: c.host_ns.expect("indexed"),
+                                counter,
+                                stf,
+                                pa,
+                            });
+                        }
+                    }
+                }
+                imu_driver::Poll::Dropped { .. } => {}
+                imu_driver::Poll::NeedMore => break,
+            }
+        }
+    }
+    (all, baro)
 }
 
 /// Ground truth with interpolation: position linear, orientation slerp, velocity from a
