@@ -43,7 +43,7 @@ struct RunArgs {
     /// World family: corridor, office, atrium, store_room, household, outdoor.
     #[arg(long, default_value = "office", value_parser = parse::<Family>)]
     family: Family,
-    /// Motion: robot, handheld, headworn, static.
+    /// Motion: robot, handheld, headworn, static, vehicle (outdoor only).
     #[arg(long, default_value = "handheld", value_parser = parse::<MotionKind>)]
     motion: MotionKind,
     /// Seed of the world, the trajectory, the clocks and all noise.
@@ -96,6 +96,10 @@ struct RunArgs {
     /// Barometer rate [Hz]: BaroPressure messages in the IMU stream (0: off; 1-100, e.g. 50).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     baro_hz: f64,
+    /// Height change over a handheld or headworn walk [m] (negative: descend; 0: flat; ±10 m,
+    /// peak vertical speed at most 0.5 m/s).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    height_change: f64,
 }
 
 #[derive(Debug, Args)]
@@ -146,6 +150,7 @@ pub fn run(args: SimArgs) -> Result<()> {
             sc.imu_spec = r.imu_grade.spec();
             sc.imu_gap_share = r.imu_gaps;
             sc.baro_hz = r.baro_hz;
+            sc.height_change_m = r.height_change;
             let s = simulate(&sc, &out, "")?;
             println!("{}", summary_line(&out, &s));
             Ok(())
@@ -270,6 +275,14 @@ mod tests {
             (vec!["--near-field", "0.7", "-o", d], "near-field share"),
             (vec!["--imu-gaps", "0.9", "-o", d], "IMU gap share"),
             (vec!["--baro-hz", "500", "-o", d], "barometer rate"),
+            (
+                vec!["--height-change", "-12", "-o", d],
+                "height change -12 m",
+            ),
+            (
+                vec!["--motion", "vehicle", "-o", d],
+                "vehicle motion needs the outdoor family",
+            ),
             (vec!["--imu-hz", "20", "-o", d], "50-400 Hz"),
         ] {
             let e = run(parse(&args).unwrap()).unwrap_err().to_string();

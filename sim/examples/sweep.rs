@@ -16,6 +16,9 @@ fn main() {
         .unwrap_or(5.0);
     for f in Family::ALL {
         for m in MotionKind::ALL {
+            if m == MotionKind::Vehicle && f != Family::Outdoor {
+                continue; // cars drive outdoors only
+            }
             let (mut pts, mut fr, mut out, mut lo, mut hi) = (0, 0, 0, u64::MAX, 0);
             for seed in 0..seeds {
                 let mut sc = Scenario::new(f, m, seed);

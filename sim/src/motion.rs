@@ -25,15 +25,19 @@ pub enum MotionKind {
     Headworn,
     /// At rest on a tilted mount (IMU calibration and noise statistics).
     Static,
+    /// Ground vehicle (car-like): non-holonomic, no side slip, 3-12 m/s, smooth turns, flat;
+    /// outdoors only.
+    Vehicle,
 }
 
 impl MotionKind {
     /// All kinds.
-    pub const ALL: [MotionKind; 4] = [
+    pub const ALL: [MotionKind; 5] = [
         MotionKind::Robot,
         MotionKind::Handheld,
         MotionKind::Headworn,
         MotionKind::Static,
+        MotionKind::Vehicle,
     ];
 
     /// Name on the command line.
@@ -43,6 +47,7 @@ impl MotionKind {
             MotionKind::Handheld => "handheld",
             MotionKind::Headworn => "headworn",
             MotionKind::Static => "static",
+            MotionKind::Vehicle => "vehicle",
         }
     }
 
@@ -52,6 +57,7 @@ impl MotionKind {
             MotionKind::Robot => (0.2, 0.6),
             MotionKind::Handheld | MotionKind::Headworn => (1.0, 1.5),
             MotionKind::Static => (0.0, 0.0),
+            MotionKind::Vehicle => (3.0, 12.0),
         }
     }
 }
@@ -69,7 +75,9 @@ impl FromStr for MotionKind {
             .into_iter()
             .find(|k| k.name() == s)
             .ok_or_else(|| {
-                format!("unknown motion {s:?} (expected robot, handheld, headworn or static)")
+                format!(
+                    "unknown motion {s:?} (expected robot, handheld, headworn, static or vehicle)"
+                )
             })
     }
 }
@@ -124,6 +132,23 @@ pub struct Trajectory {
     roll: [Wave; 2],
     static_q: UnitQuaternion<f64>,
     rest: Option<Rest>,
+    climb: Option<Climb>,
+}
+
+/// A height change over the motion: z rises by `h` along a quintic smoothstep of motion time
+/// over `span_s` (starting `h` up when `h` is negative, so the walk descends to its base height).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Climb {
+    h: f64,
+    span_s: f64,
+}
+
+impl Climb {
+    fn dz(&self, t: f64) -> f64 {
+        let u = (t / self.span_s).clamp(0.0, 1.0);
+        let s = u * u * u * (u * (6.0 * u - 15.0) + 10.0);
+        (-self.h).max(0.0) + self.h * s
+    }
 }
 
 /// Rest at the start and at the end of a trajectory: motion time stands still, then ramps up
@@ -177,6 +202,49 @@ const TURN_STEPS: u32 = 12;
 
 /// Clearance kept from obstacles by the path's control points \[m\].
 pub const CLEARANCE_M: f64 = 0.6;
+/// Clearance a vehicle's path keeps \[m\] (half a car's width and a margin).
+pub const VEHICLE_CLEARANCE_M: f64 = 3.0;
+/// Largest heading change of a vehicle between two control points (1 s apart) \[rad\].
+const VEHICLE_MAX_TURN: f64 = 0.5;
+
+/// How far ahead a vehicle looks for free road \[m\] (at least; more at speed).
+const VEHICLE_LOOK_M: f64 = 25.0;
+
+/// One 1 s knot of a car: find the free direction closest to the current heading (looking
+/// [`VEHICLE_LOOK_M`] or 3 s ahead, whichever is farther, all around), turn towards it by at
+/// most [`VEHICLE_MAX_TURN`], and slow down to the lowest speed in proportion to how sharp the
+/// turn is (so the turn radius stays a car's). None when nothing nearby is free.
+fn vehicle_step(
+    world: &World,
+    p: [f64; 2],
+    heading: &mut f64,
+    speed: &mut f64,
+    (vmin, vmax): (f64, f64),
+) -> Option<[f64; 2]> {
+    let look = VEHICLE_LOOK_M.max(3.0 * *speed);
+    let n: u32 = 36;
+    let target = (0..=n).find_map(|k| {
+        let side = if k % 2 == 0 { 1.0 } else { -1.0 };
+        let psi = *heading + side * f64::from(k.div_ceil(2)) * PI / f64::from(n / 2);
+        let far = [p[0] + look * psi.cos(), p[1] + look * psi.sin()];
+        world
+            .path_free(p, far, VEHICLE_CLEARANCE_M)
+            .then_some(psi - *heading)
+    })?;
+    let turn = target.clamp(-VEHICLE_MAX_TURN, VEHICLE_MAX_TURN);
+    // Back towards a cruising speed of 3/4 of the top speed after slowing down.
+    *speed += 0.3 * (0.75 * vmax - *speed);
+    // Sharp turns at the lowest speed; straight on, the drawn speed.
+    let sharp = (turn.abs() / VEHICLE_MAX_TURN).min(1.0);
+    *speed = (*speed * (1.0 - sharp) + vmin * sharp).clamp(vmin, vmax);
+    let psi = *heading + turn;
+    let q = [p[0] + *speed * psi.cos(), p[1] + *speed * psi.sin()];
+    if !world.path_free(p, q, 0.5 * VEHICLE_CLEARANCE_M) {
+        return None;
+    }
+    *heading = psi;
+    Some(q)
+}
 
 impl Trajectory {
     /// Lays a trajectory of `duration_s` \[s\] (plus a margin) through `world`, from `seed`.
@@ -187,10 +255,18 @@ impl Trajectory {
         duration_s: f64,
     ) -> Result<Trajectory, SimError> {
         let mut rng = SimRng::new(seed, &format!("motion/{}", kind.name()));
-        let start = world.free_point(&mut rng, CLEARANCE_M + 0.3)?;
+        let vehicle = kind == MotionKind::Vehicle;
+        // A car keeps more room, looks a knot ahead and turns less per knot.
+        let clearance = if vehicle {
+            VEHICLE_CLEARANCE_M
+        } else {
+            CLEARANCE_M
+        };
+        let max_turn = if vehicle { VEHICLE_MAX_TURN } else { MAX_TURN };
+        let start = world.free_point(&mut rng, clearance + 0.3)?;
         let (vmin, vmax) = kind.speed_range();
         let knot_s = match kind {
-            MotionKind::Robot => 1.0,
+            MotionKind::Robot | MotionKind::Vehicle => 1.0,
             _ => 0.5,
         };
         let n = ((duration_s + 10.0) / knot_s).ceil() as usize + 6;
@@ -200,28 +276,38 @@ impl Trajectory {
             let mut speed = rng.uniform(vmin, vmax);
             let turn_sigma: f64 = match kind {
                 MotionKind::Robot => 0.25,
+                MotionKind::Vehicle => 0.1,
                 _ => 0.2,
             };
             let mut p = start;
             while ctrl.len() < n {
                 speed = (speed + 0.08 * (vmax - vmin) * rng.normal()).clamp(vmin, vmax);
                 heading += turn_sigma * rng.normal();
+                if vehicle {
+                    if let Some(q) = vehicle_step(world, p, &mut heading, &mut speed, (vmin, vmax))
+                    {
+                        ctrl.push(q);
+                        p = q;
+                        continue;
+                    }
+                }
                 let step = speed * knot_s;
+                let look0 = if vehicle { 3.0 * step } else { 1.0 };
                 // Prefer the drawn heading, then ever larger turns to either side (at most
                 // MAX_TURN per knot, so the path never reverses on the spot); look ahead so that
                 // turns start early; slow down and accept less clearance in tight spots.
                 let mut next = None;
                 'search: for (scale, clr, look) in [
-                    (1.0, CLEARANCE_M, 1.0),
-                    (1.0, CLEARANCE_M, 0.0),
-                    (0.5, CLEARANCE_M, 0.0),
-                    (0.5, 0.5 * CLEARANCE_M, 0.0),
-                    (0.25, 0.4 * CLEARANCE_M, 0.0),
+                    (1.0, clearance, look0),
+                    (1.0, clearance, 0.0),
+                    (0.5, clearance, 0.0),
+                    (0.5, 0.5 * clearance, 0.0),
+                    (0.25, 0.4 * clearance, 0.0),
                 ] {
                     for k in 0..=2 * TURN_STEPS {
                         let side = if k % 2 == 0 { 1.0 } else { -1.0 };
                         let psi = heading
-                            + side * f64::from(k.div_ceil(2)) * MAX_TURN / f64::from(TURN_STEPS);
+                            + side * f64::from(k.div_ceil(2)) * max_turn / f64::from(TURN_STEPS);
                         let dir = [psi.cos(), psi.sin()];
                         let reach = step * scale + look;
                         let far = [p[0] + reach * dir[0], p[1] + reach * dir[1]];
@@ -236,7 +322,7 @@ impl Trajectory {
                 let q = next.unwrap_or_else(|| {
                     // Boxed in: creep while turning (never a full stop, which would make the
                     // heading undefined).
-                    heading += MAX_TURN;
+                    heading += max_turn;
                     [p[0] + 0.05 * heading.cos(), p[1] + 0.05 * heading.sin()]
                 });
                 ctrl.push(q);
@@ -274,6 +360,7 @@ impl Trajectory {
             MotionKind::Handheld => rng.uniform(1.1, 1.4),
             MotionKind::Headworn => rng.uniform(1.55, 1.8),
             MotionKind::Static => rng.uniform(0.5, 1.2),
+            MotionKind::Vehicle => rng.uniform(0.8, 1.5),
         };
         let static_q = UnitQuaternion::from_euler_angles(
             rng.uniform(-0.1, 0.1),
@@ -301,6 +388,7 @@ impl Trajectory {
             roll,
             static_q,
             rest: None,
+            climb: None,
         })
     }
 
@@ -317,6 +405,21 @@ impl Trajectory {
             },
         });
         self
+    }
+
+    /// Climbs (or, negative, descends) `h` \[m\] over the motion up to host time `duration_s`
+    /// \[s\]: a quintic smoothstep of motion time, so vertical velocity and acceleration stay
+    /// continuous; peak vertical speed 1.875 |h| / (motion time). A descent starts `|h|` above the
+    /// base height. Zero leaves the trajectory as it was. Call after [`Trajectory::with_rest`].
+    pub fn with_height_change(mut self, h: f64, duration_s: f64) -> Trajectory {
+        let span_s = self.rest.map_or(duration_s, |r| r.warp(duration_s));
+        self.climb = (h != 0.0 && span_s > 0.0).then_some(Climb { h, span_s });
+        self
+    }
+
+    /// Base height of the body above the floor \[m\] (before bob and height change).
+    pub fn base_height(&self) -> f64 {
+        self.height
     }
 
     /// Segment index and local parameter of time `t` \[s\].
@@ -379,7 +482,12 @@ impl Trajectory {
         let step = TAU * self.step_hz * t;
         let bob = self.bob_m * step.sin();
         let sway = self.sway_m * (0.5 * step).sin();
-        let p = Vector3::new(p2[0] - sh * sway, p2[1] + ch * sway, self.height + bob);
+        let climb = self.climb.map_or(0.0, |c| c.dz(t));
+        let p = Vector3::new(
+            p2[0] - sh * sway,
+            p2[1] + ch * sway,
+            self.height + bob + climb,
+        );
         let sum = |w: &[Wave; 2]| w[0].at(t) + w[1].at(t);
         let step_pitch = if self.step_hz > 0.0 {
             0.01 * step.cos()

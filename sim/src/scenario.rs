@@ -86,7 +86,16 @@ pub struct Scenario {
     pub imu_gap_share: f64,
     /// Barometer rate \[Hz\]: pressure messages in the IMU stream (0: off; else 1-100).
     pub baro_hz: f64,
+    /// Height change over the walk \[m\] (handheld and headworn only; 0: flat): the body climbs
+    /// (positive) or descends (negative, starting that much higher) along a smooth ramp, peak
+    /// vertical speed at most 0.5 m/s, |h| up to 10 m, below the world's ceiling.
+    pub height_change_m: f64,
 }
+
+/// Largest height change of a walk \[m\].
+pub const MAX_HEIGHT_CHANGE_M: f64 = 10.0;
+/// Largest peak vertical speed of a height change \[m/s\] (brisk stair climbing).
+pub const MAX_CLIMB_MPS: f64 = 0.5;
 
 /// Largest lever-arm component of the radar mount \[m\].
 pub const MAX_LEVER_M: f64 = 2.0;
@@ -114,6 +123,7 @@ impl Scenario {
             near_field_share: 0.0,
             imu_gap_share: 0.0,
             baro_hz: 0.0,
+            height_change_m: 0.0,
         }
     }
 
@@ -220,6 +230,33 @@ impl Scenario {
                 self.near_field_share
             ));
         }
+        if self.motion == MotionKind::Vehicle && self.family != Family::Outdoor {
+            return bad(format!(
+                "vehicle motion needs the outdoor family, not {}",
+                self.family
+            ));
+        }
+        if self.height_change_m != 0.0 {
+            let h = self.height_change_m;
+            if !(h.is_finite() && h.abs() <= MAX_HEIGHT_CHANGE_M) {
+                return bad(format!(
+                    "height change {h} m is outside ±{MAX_HEIGHT_CHANGE_M} m"
+                ));
+            }
+            if !matches!(self.motion, MotionKind::Handheld | MotionKind::Headworn) {
+                return bad(format!(
+                    "height change {h} m: only handheld and headworn motion change height, not {}",
+                    self.motion
+                ));
+            }
+            let moving = self.duration_s - self.rest_start_s - self.rest_end_s;
+            let peak = 1.875 * h.abs() / moving.max(1e-9);
+            if peak > MAX_CLIMB_MPS {
+                return bad(format!(
+                    "height change {h} m over {moving} s of motion climbs at up to {peak:.2} m/s, more than {MAX_CLIMB_MPS} m/s"
+                ));
+            }
+        }
         if !(self.baro_hz == 0.0 || (1.0..=100.0).contains(&self.baro_hz)) {
             return bad(format!(
                 "barometer rate {} Hz must be 0 (off) or within 1-100 Hz",
@@ -281,6 +318,9 @@ impl Scenario {
         }
         if self.baro_hz > 0.0 {
             let _ = write!(extra, "; barometer {} Hz", self.baro_hz);
+        }
+        if self.height_change_m != 0.0 {
+            let _ = write!(extra, "; height change {} m", self.height_change_m);
         }
         if self.near_field_share > 0.0 {
             let _ = write!(
@@ -377,9 +417,23 @@ pub fn clocks(seed: u64) -> (SensorClock, SensorClock) {
 /// Simulates `sc` into a new session directory `dir`; `progress` gets the fraction done.
 pub fn run(sc: &Scenario, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<Summary, SimError> {
     sc.validate()?;
-    let world = World::generate(sc.family, sc.seed);
-    let traj = Trajectory::generate(sc.motion, &world, sc.seed, sc.duration_s + GT_TAIL_S)?
+    let world = if sc.motion == MotionKind::Vehicle {
+        World::generate_vehicle_lot(sc.seed)
+    } else {
+        World::generate(sc.family, sc.seed)
+    };
+    let mut traj = Trajectory::generate(sc.motion, &world, sc.seed, sc.duration_s + GT_TAIL_S)?
         .with_rest(sc.rest_start_s, sc.rest_end_s, sc.duration_s);
+    if sc.height_change_m != 0.0 {
+        let top = traj.base_height() + sc.height_change_m.abs() + 0.2;
+        if top >= world.height {
+            return Err(SimError::Config(format!(
+                "height change {} m lifts the body to {top:.2} m, above the {} ceiling at {:.2} m",
+                sc.height_change_m, sc.family, world.height
+            )));
+        }
+        traj = traj.with_height_change(sc.height_change_m, sc.duration_s);
+    }
     let model = sc.radar_model()?;
     let ext = sc.extrinsics();
     let (t_br, q_br) = sensor_pose(&ext.radar);

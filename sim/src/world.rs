@@ -284,6 +284,36 @@ impl Builder {
         }
     }
 
+    /// A parked car (metal, 1.8 x 4.5 x 1.5 m) at `at` (lower corner), if 1.5 m clear of everything.
+    fn car(&mut self, at: [f64; 2]) {
+        let min = [at[0], at[1], 0.0];
+        let max = [at[0] + 1.8, at[1] + 4.5, 1.5];
+        if !self
+            .prims
+            .iter()
+            .all(|p| rect_gap(p, [min[0], min[1]], [max[0], max[1]]) >= 1.5)
+        {
+            return;
+        }
+        self.prims.push(Primitive {
+            shape: Shape::Box { min, max },
+            material: Material::Metal,
+        });
+        for (cx, cy, z, rcs) in [
+            (min[0], min[1], 0.5, 0.3),
+            (max[0], min[1], 0.5, 0.3),
+            (min[0], max[1], 0.5, 0.3),
+            (max[0], max[1], 0.5, 0.3),
+            (min[0], 0.5 * (min[1] + max[1]), 0.7, 1.0),
+            (max[0], 0.5 * (min[1] + max[1]), 0.7, 1.0),
+        ] {
+            self.scat.push(Scatterer {
+                p: Vector3::new(cx, cy, z),
+                rcs,
+            });
+        }
+    }
+
     fn pillar(&mut self, c: [f64; 2], r: f64, z1: f64, m: Material) {
         self.prims.push(Primitive {
             shape: Shape::Cylinder { c, r, z0: 0.0, z1 },
@@ -402,10 +432,32 @@ impl World {
             Family::Atrium => atrium(&mut b),
             Family::StoreRoom => store_room(&mut b),
             Family::Household => household(&mut b),
-            Family::Outdoor => outdoor(&mut b),
+            Family::Outdoor => outdoor(&mut b, 1.0),
         };
         World {
             family,
+            seed,
+            min: [0.0, 0.0],
+            max: [w, d],
+            height: h,
+            prims: b.prims,
+            scatterers: b.scat,
+        }
+    }
+
+    /// The outdoor world for a ground vehicle: the `outdoor` family at four times the size (a
+    /// 120-180 x 80-120 m car park with rows of parked cars and lamp posts every 16-24 m across
+    /// it), from
+    /// a stream of its own (`world/outdoor-vehicle`), so walkers' outdoor worlds stay as they are.
+    pub fn generate_vehicle_lot(seed: u64) -> World {
+        let mut b = Builder {
+            prims: Vec::new(),
+            scat: Vec::new(),
+            rng: SimRng::new(seed, "world/outdoor-vehicle"),
+        };
+        let (w, d, h) = outdoor(&mut b, VEHICLE_LOT_SCALE);
+        World {
+            family: Family::Outdoor,
             seed,
             min: [0.0, 0.0],
             max: [w, d],
@@ -805,6 +857,9 @@ fn household(b: &mut Builder) -> (f64, f64, f64) {
     (w, d, h)
 }
 
+/// Size factor of the vehicle's outdoor lot over the walkers' plaza.
+pub const VEHICLE_LOT_SCALE: f64 = 4.0;
+
 /// Height of the (absent) sky outdoors: far beyond any radar range \[m\].
 pub const OUTDOOR_SKY_M: f64 = 1000.0;
 
@@ -812,9 +867,9 @@ pub const OUTDOOR_SKY_M: f64 = 1000.0;
 /// sides 8-15 m beyond its edge (facades 8-20 m high with window-frame scatterers every 2.5-4 m and
 /// strong building corners), a row or two of parked cars, lamp posts every 12-25 m, and sparse weak
 /// ground clutter (kerbs, drains, stones). No ceiling; the ground is the weak floor material.
-fn outdoor(b: &mut Builder) -> (f64, f64, f64) {
-    let w = b.rng.uniform(30.0, 45.0);
-    let d = b.rng.uniform(20.0, 30.0);
+fn outdoor(b: &mut Builder, scale: f64) -> (f64, f64, f64) {
+    let w = scale * b.rng.uniform(30.0, 45.0);
+    let d = scale * b.rng.uniform(20.0, 30.0);
     // Facades: along the far y side always, and along one or both x sides.
     let sides = 2 + b.rng.below(2);
     for side in 0..sides {
@@ -882,31 +937,7 @@ fn outdoor(b: &mut Builder) -> (f64, f64, f64) {
         let mut x = b.rng.uniform(2.0, 8.0);
         while x + 2.0 < w - 2.0 {
             if b.rng.chance(0.25) {
-                let min = [x, y, 0.0];
-                let max = [x + 1.8, y + 4.5, 1.5];
-                let ok = b
-                    .prims
-                    .iter()
-                    .all(|p| rect_gap(p, [min[0], min[1]], [max[0], max[1]]) >= 1.5);
-                if ok {
-                    b.prims.push(Primitive {
-                        shape: Shape::Box { min, max },
-                        material: Material::Metal,
-                    });
-                    for (cx, cy, z, rcs) in [
-                        (min[0], min[1], 0.5, 0.3),
-                        (max[0], min[1], 0.5, 0.3),
-                        (min[0], max[1], 0.5, 0.3),
-                        (max[0], max[1], 0.5, 0.3),
-                        (min[0], 0.5 * (min[1] + max[1]), 0.7, 1.0),
-                        (max[0], 0.5 * (min[1] + max[1]), 0.7, 1.0),
-                    ] {
-                        b.scat.push(Scatterer {
-                            p: Vector3::new(cx, cy, z),
-                            rcs,
-                        });
-                    }
-                }
+                b.car([x, y]);
             }
             x += 2.6;
         }
@@ -939,6 +970,35 @@ fn outdoor(b: &mut Builder) -> (f64, f64, f64) {
             p,
             rcs: b.rng.uniform(0.001, 0.005),
         });
+    }
+    if scale > 1.0 {
+        // A large lot: rows of parked cars (half the slots taken) every 16-24 m across it, with
+        // lamp posts every 15-25 m in each row.
+        let mut y = b.rng.uniform(12.0, 18.0);
+        while y < d - 10.0 {
+            let mut x = b.rng.uniform(4.0, 10.0);
+            while x + 2.0 < w - 4.0 {
+                if b.rng.chance(0.5) {
+                    b.car([x, y]);
+                }
+                x += 2.6;
+            }
+            let mut x = b.rng.uniform(5.0, 15.0);
+            while x < w - 5.0 {
+                let c = [x, y + 2.25];
+                if b.prims.iter().all(|p| rect_gap(p, c, c) >= 1.0) {
+                    b.pillar(c, 0.08, 6.0, Material::Metal);
+                    for (z, rcs) in [(0.5, 0.3), (2.0, 0.2)] {
+                        b.scat.push(Scatterer {
+                            p: Vector3::new(c[0], c[1], z),
+                            rcs,
+                        });
+                    }
+                }
+                x += b.rng.uniform(15.0, 25.0);
+            }
+            y += b.rng.uniform(16.0, 24.0);
+        }
     }
     (w, d, OUTDOOR_SKY_M)
 }
