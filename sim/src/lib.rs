@@ -2,20 +2,25 @@
 //!
 //! Data flow, one module per stage:
 //!
-//! 1. [`world`]: a procedural indoor floor of a named [`Family`](world::Family), deterministic
-//!    from (family, seed): walls, floor, ceiling, pillars, furniture, glass, edge scatterers.
+//! 1. [`world`]: a procedural indoor floor (or an open outdoor plaza) of a named
+//!    [`Family`](world::Family), deterministic from (family, seed): walls, floor, ceiling,
+//!    pillars, furniture, glass, edge scatterers.
 //! 2. [`motion`]: a smooth body [`Trajectory`](motion::Trajectory) through its free space (ground
-//!    robot or walking person).
+//!    robot, walking person, car).
 //! 3. [`radar`]: an AWR1843-like radar: sparse point clouds with ~75 % outliers, Doppler from the
 //!    true motion; encoded as the TI out-of-box demo's UART frames, with the matching `.cfg`.
-//! 4. [`imu`]: an MTi-1-like IMU with datasheet noise, encoded as MTData2 messages.
+//! 4. [`imu`]: an MTi-1-like IMU with datasheet noise (other grades as presets), encoded as
+//!    MTData2 messages, and an optional barometer in the same stream.
 //! 5. [`clock`]: each sensor's clock (offset, drift) and its UART (baud, host read chunks).
 //! 6. [`scenario`]: all of the above written as a milliEgo session with ground truth.
 //! 7. [`split`]: the benchmark's train / validation / held-out test scenarios.
 //!
 //! Same scenario and seed, same bytes: every random draw comes from a ChaCha8 stream seeded
 //! from the scenario seed and a purpose label ([`rng`]). The model assumptions and their
-//! sources are in `docs/simulator.md`.
+//! sources are in `docs/simulator.md`, which also lists the failure-mode settings of
+//! [`Scenario`](scenario::Scenario) (radar mounts, coarse Doppler, near-field leakage, IMU
+//! grades and gaps, barometer, vehicle and height-change motion); at their defaults the output
+//! is unchanged.
 //!
 //! ```no_run
 //! use milliego_sim::{scenario::{run, Scenario}, world::Family, motion::MotionKind};
