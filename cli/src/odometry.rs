@@ -28,9 +28,22 @@ pub struct OdometryArgs {
     /// Output trajectory (TUM; body in world, session host clock).
     #[arg(short, long)]
     out: PathBuf,
-    /// Doppler noise of a static point, in m/s (defaults to half the .cfg's velocity resolution).
+    /// Doppler noise of a static point besides quantisation, in m/s (default 0.05; the quantisation step is the .cfg's velocity resolution).
     #[arg(long)]
     doppler_sigma: Option<f32>,
+    /// Doppler quantisation step in m/s (0: continuous). Default: the .cfg's velocity resolution
+    /// when the session has a .cfg, else continuous.
+    #[arg(long)]
+    doppler_step: Option<f32>,
+    /// Near field in m: points closer than this with zero Doppler are skipped as leakage
+    /// (default 0: off; 1.0 for radars with leakage).
+    #[arg(long)]
+    near_field: Option<f32>,
+    /// Let radar updates correct the heading and the vertical gyro bias (off by default: body
+    /// velocity cannot observe heading, and on tilted or yawed mounts those corrections made it
+    /// worse than the gyro alone; see docs/odometry.md).
+    #[arg(long)]
+    radar_heading: bool,
 }
 
 pub fn run(a: OdometryArgs) -> Result<()> {
@@ -42,13 +55,16 @@ pub fn run(a: OdometryArgs) -> Result<()> {
         },
         ..OfflineConfig::default()
     };
-    let vres = session
-        .radar_cfg()?
-        .and_then(|t| radar_driver::cfg::RadarConfig::parse(&t).ok())
-        .and_then(|c| c.derive(None).ok())
-        .map(|d| d.velocity_resolution_mps as f32);
-    if let Some(s) = a.doppler_sigma.or(vres.map(|v| v / 2.0)) {
+    if let Some(s) = a.doppler_sigma {
         cfg.ego.sigma = s;
+    }
+    if let Some(s) = a.doppler_step {
+        cfg.ego.doppler_step = s;
+        cfg.doppler_step_from_cfg = false;
+    }
+    cfg.rio.radar_heading = a.radar_heading;
+    if let Some(m) = a.near_field {
+        cfg.ego.near_field_m = m;
     }
     let r = run_offline(&session, &cfg).map_err(|e| format!("{}: {e}", a.session.display()))?;
     write_tum(&a.out, &r.trajectory)?;
@@ -58,7 +74,8 @@ pub fn run(a: OdometryArgs) -> Result<()> {
             "session": a.session.display().to_string(), "estimator": format!("{:?}", a.estimator).to_lowercase(),
             "poses": r.trajectory.len(), "radar_frames": r.radar_frames, "imu_samples": r.imu_samples,
             "ego_velocity": {"ok": r.ego_ok, "degenerate": r.ego_degenerate, "too_few_points": r.ego_too_few, "no_consensus": r.ego_no_consensus},
-            "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates},
+            "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "vertical_bounds": r.vertical_bounds},
+            "near_field_points": r.near_field_points,
             "radar_stream": {"frames_bad": r.radar.bad, "bytes_skipped": r.radar.bytes_skipped},
             "imu_stream": {"frames_bad": r.imu.bad, "bytes_skipped": r.imu.bytes_skipped, "not_samples": r.imu.not_samples},
             "clock_unsynced": r.clock_unsynced,

@@ -39,8 +39,12 @@ pub enum Model {
 pub struct Config {
     /// Components to estimate.
     pub model: Model,
-    /// Doppler noise of a static point \[m/s\] (about the velocity resolution / 2).
+    /// Doppler noise of a static point, fine quantisation included \[m/s\].
     pub sigma: f32,
+    /// Doppler quantisation step \[m/s\] (the radar's velocity resolution: TI's demos report
+    /// `bin x resolution`; 0: continuous). A static point's radial velocity is then off by up to
+    /// half a step: see [`Config::inlier_threshold`] and [`Config::doppler_std`].
+    pub doppler_step: f32,
     /// Direction error of a point \[rad\] (angular resolution, cell merging): a point's radial
     /// velocity is then off by about `|v| direction_sigma`, which adds to `sigma` in the
     /// covariance of the estimate (not in the inlier gate, which would let ghosts in).
@@ -60,8 +64,39 @@ pub struct Config {
     pub min_spread: f32,
     /// Points closer than this are skipped (direction undefined) \[m\].
     pub min_range: f32,
+    /// Near field \[m\]: points this close with zero Doppler (within the inlier gate of 0) may be
+    /// TX-RX leakage or reflections off the mount, which stay at zero Doppler whatever the
+    /// motion: they do not vote for a consensus (a frame of leakage and a few real points must
+    /// not read "at rest"), though the least squares keeps them where they fit. 0 (the default)
+    /// turns this off: at rest with few far points it lets ghosts outvote the zero; set it (1 m)
+    /// for rigs whose radar shows leakage.
+    pub near_field_m: f32,
     /// RNG seed (the estimate is deterministic for a seed and input).
     pub seed: u64,
+}
+
+impl Config {
+    /// This configuration for a radar whose Doppler is quantised in steps of
+    /// `velocity_resolution_mps` \[m/s\] (a TI `.cfg`'s derived velocity resolution).
+    pub fn with_velocity_resolution(mut self, velocity_resolution_mps: f64) -> Config {
+        if velocity_resolution_mps.is_finite() && velocity_resolution_mps > 0.0 {
+            self.doppler_step = velocity_resolution_mps as f32;
+        }
+        self
+    }
+
+    /// The Doppler gate around zero and around a hypothesis \[m/s\]: `inlier_sigmas x sigma`,
+    /// but never narrower than half a quantisation step plus `sigma` (a coarse step's rounding
+    /// alone reaches `step / 2`).
+    pub fn inlier_threshold(&self) -> f32 {
+        (self.inlier_sigmas * self.sigma).max(self.doppler_step.max(0.0) / 2.0 + self.sigma)
+    }
+
+    /// Doppler standard deviation of a static point \[m/s\]: `sigma`, but never below the
+    /// rounding of a quantisation step (`step / sqrt(12)`).
+    pub fn doppler_std(&self) -> f32 {
+        self.sigma.max(self.doppler_step.max(0.0) / 12f32.sqrt())
+    }
 }
 
 impl Default for Config {
@@ -76,6 +111,8 @@ impl Default for Config {
             confidence: 0.999,
             min_spread: 1e-3,
             min_range: 0.1,
+            near_field_m: 0.0,
+            doppler_step: 0.0,
             seed: 0x5EED,
             direction_sigma: 0.3,
         }
@@ -136,6 +173,9 @@ pub struct Estimate {
     pub usable: usize,
     /// Points skipped for being too close to have a direction.
     pub skipped: usize,
+    /// Usable points that did not vote as possible near-field leakage (within
+    /// [`Config::near_field_m`] at zero Doppler).
+    pub near_field: usize,
     /// RMS residual of the inliers \[m/s\].
     pub residual_rms: f32,
     /// Inlier mask over the input detections (false for skipped points).
@@ -155,6 +195,7 @@ impl Estimate {
             inliers: 0,
             usable: 0,
             skipped: 0,
+            near_field: 0,
             residual_rms: 0.0,
             inlier_mask: Vec::with_capacity(points),
             iterations: 0,
@@ -173,6 +214,7 @@ pub struct EgoVelocityEstimator {
     cfg: Config,
     dirs: Vec<Vector3<f64>>,
     vr: Vec<f64>,
+    voter: Vec<bool>,
     idx: Vec<usize>,
     inl: Vec<usize>,
     inlier_dirs: Vec<Vector3<f64>>,
@@ -185,6 +227,7 @@ impl EgoVelocityEstimator {
             cfg,
             dirs: Vec::new(),
             vr: Vec::new(),
+            voter: Vec::new(),
             idx: Vec::new(),
             inl: Vec::new(),
             inlier_dirs: Vec::new(),
@@ -222,8 +265,11 @@ impl EgoVelocityEstimator {
         out: &mut Estimate,
     ) {
         let cfg = self.cfg;
+        let zero_gate = cfg.inlier_threshold();
+        let mut near_field = 0;
         self.dirs.clear();
         self.vr.clear();
+        self.voter.clear();
         self.idx.clear();
         for (i, d) in detections.iter().enumerate() {
             let p = Vector3::new(
@@ -235,6 +281,9 @@ impl EgoVelocityEstimator {
             if !(r.is_finite() && r >= f64::from(cfg.min_range) && d.radial_velocity.is_finite()) {
                 continue;
             }
+            let leak = r < f64::from(cfg.near_field_m) && d.radial_velocity.abs() <= zero_gate;
+            near_field += usize::from(leak);
+            self.voter.push(!leak);
             let mut u = p / r;
             if cfg.model == Model::Planar {
                 u.z = 0.0;
@@ -254,6 +303,7 @@ impl EgoVelocityEstimator {
             inliers: 0,
             usable,
             skipped: detections.len() - usable,
+            near_field,
             residual_rms: 0.0,
             inlier_mask: mask,
             iterations: 0,
@@ -278,12 +328,11 @@ impl EgoVelocityEstimator {
             }
         }
 
-        let thresh = f64::from(cfg.inlier_sigmas * cfg.sigma);
-        let k_sig = f64::from(cfg.inlier_sigmas);
-        let (s0, sd) = (f64::from(cfg.sigma), f64::from(cfg.direction_sigma));
-        // Inliers are chosen with the Doppler noise alone (a wider gate lets ghosts in); the
-        // direction errors enter the covariance.
-        let thresh_for = |_v: &Vector3<f64>| k_sig * s0;
+        let thresh = f64::from(cfg.inlier_threshold());
+        let (s0, sd) = (f64::from(cfg.doppler_std()), f64::from(cfg.direction_sigma));
+        // Inliers are chosen with the Doppler noise and quantisation alone (a wider gate lets
+        // ghosts in); the direction errors enter the covariance.
+        let thresh_for = |_v: &Vector3<f64>| thresh;
         let sigma_eff = |v: &Vector3<f64>| (s0 * s0 + (v.norm() * sd).powi(2)).sqrt();
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
         let mut best: Option<(usize, f64, Vector3<f64>)> = None;
@@ -304,7 +353,7 @@ impl EgoVelocityEstimator {
             if cfg.model == Model::Planar {
                 v.z = 0.0;
             }
-            let (count, cost) = score(&self.dirs, &self.vr, &v, thresh_for(&v));
+            let (count, cost) = score(&self.dirs, &self.vr, &self.voter, &v, thresh_for(&v));
             best = Some((count, cost, v));
         }
         let mut max_iter = cfg.max_iterations;
@@ -332,7 +381,7 @@ impl EgoVelocityEstimator {
             if !agrees(&v) {
                 continue;
             }
-            let (count, cost) = score(&self.dirs, &self.vr, &v, thresh_for(&v));
+            let (count, cost) = score(&self.dirs, &self.vr, &self.voter, &v, thresh_for(&v));
             if best
                 .as_ref()
                 .is_none_or(|b| count > b.0 || (count == b.0 && cost < b.1))
@@ -470,10 +519,20 @@ fn solve(
 }
 
 /// Inlier count and truncated squared cost of a hypothesis.
-fn score(dirs: &[Vector3<f64>], vr: &[f64], v: &Vector3<f64>, thresh: f64) -> (usize, f64) {
+/// Only voters count (see [`Config::near_field_m`]).
+fn score(
+    dirs: &[Vector3<f64>],
+    vr: &[f64],
+    voter: &[bool],
+    v: &Vector3<f64>,
+    thresh: f64,
+) -> (usize, f64) {
     let mut count = 0;
     let mut cost = 0.0;
-    for (d, r) in dirs.iter().zip(vr) {
+    for ((d, r), &votes) in dirs.iter().zip(vr).zip(voter) {
+        if !votes {
+            continue;
+        }
         let e = (r + d.dot(v)).abs();
         if e <= thresh {
             count += 1;

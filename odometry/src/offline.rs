@@ -37,6 +37,9 @@ pub struct OfflineConfig {
     pub velocity_cov_scale: f64,
     /// Rest detection and the updates at rest.
     pub rest: RestConfig,
+    /// Take the Doppler quantisation step ([`EgoConfig::doppler_step`]) from the session's
+    /// `.cfg` (its velocity resolution) when it has one.
+    pub doppler_step_from_cfg: bool,
 }
 
 impl Default for OfflineConfig {
@@ -50,6 +53,7 @@ impl Default for OfflineConfig {
             level_window_s: c.level_window_s,
             velocity_cov_scale: c.velocity_cov_scale,
             rest: c.rest,
+            doppler_step_from_cfg: true,
         }
     }
 }
@@ -81,6 +85,11 @@ pub struct OfflineResult {
     pub rest_samples: u64,
     /// Zero-velocity and zero-rate updates applied at rest.
     pub rest_updates: u64,
+    /// Vertical velocity bounds applied ([`RioConfig::vertical_velocity_std`]).
+    pub vertical_bounds: u64,
+    /// Radar points that did not vote as possible near-field leakage
+    /// ([`EgoConfig::near_field_m`]).
+    pub near_field_points: u64,
     /// IMU samples integrated.
     pub imu_samples: usize,
     /// Sensor-to-host clock maps (None when the session has no timing index).
@@ -136,10 +145,22 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
     let clock = SessionClock::fit(session, &frames, &imu)?;
     let (radar_clock, imu_clock, clock_unsynced) = (clock.radar, clock.imu, clock.unsynced());
 
+    // The Doppler quantisation step from the session's .cfg unless the caller set one: the same
+    // rule as the runtime's (one place: `EgoConfig::with_velocity_resolution`).
+    let mut ego = cfg.ego;
+    if cfg.doppler_step_from_cfg {
+        if let Some(d) = session
+            .radar_cfg()?
+            .and_then(|text| radar_driver::cfg::RadarConfig::parse(&text).ok())
+            .and_then(|c| c.derive(None).ok())
+        {
+            ego = ego.with_velocity_resolution(d.velocity_resolution_mps);
+        }
+    }
     let mut runner = Runner::new(
         &ClassicalConfig {
             rio: cfg.rio,
-            ego: cfg.ego,
+            ego,
             level_window_s: cfg.level_window_s,
             velocity_cov_scale: cfg.velocity_cov_scale,
             rest: cfg.rest,
@@ -204,6 +225,8 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
         gated: filter.gated,
         rest_samples: c.rest_samples,
         rest_updates: filter.rest_updates,
+        vertical_bounds: filter.vertical_bounds,
+        near_field_points: c.near_field_points,
         imu_samples: imu.len(),
         radar_clock,
         imu_clock,

@@ -129,6 +129,9 @@ pub struct RestDetector {
     gyro_n: u32,
     since: Option<f64>,
     last_update: Option<f64>,
+    /// The filter refuted the last rest ([`RestDetector::refute`]): no rest until the IMU has
+    /// moved.
+    refuted: bool,
 }
 
 /// Radar verdicts kept (frames come every 30-100 ms, IMU samples every 2.5-10 ms: one or two
@@ -172,6 +175,7 @@ impl RestDetector {
             gyro_n: 0,
             since: None,
             last_update: None,
+            refuted: false,
         }
     }
 
@@ -241,7 +245,8 @@ impl RestDetector {
         let s = *self.window.back()?;
         let still = self.imu_still();
         self.still = [still, self.still[0]];
-        let now = still && self.radar_agrees(s.t);
+        self.refuted &= still;
+        let now = still && !self.refuted && self.radar_agrees(s.t);
         self.resting = [now, self.resting[0]];
         if !now {
             self.since = None;
@@ -266,6 +271,17 @@ impl RestDetector {
         self.gyro_n = 0;
         self.last_update = Some(s.t);
         Some(u)
+    }
+
+    /// The filter's velocity says the body is not at rest (a smooth cruise keeps the IMU as
+    /// still as a rest, and a sparse or tilted radar can read zero): the rest ends now, and none
+    /// begins again until the IMU has moved.
+    pub fn refute(&mut self) {
+        self.refuted = true;
+        self.resting[0] = false;
+        self.since = None;
+        self.gyro_sum = Vector3::zeros();
+        self.gyro_n = 0;
     }
 
     /// Whether the last sample decided on was at rest.

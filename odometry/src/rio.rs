@@ -48,6 +48,26 @@ pub struct RioConfig {
     /// (its uncertainty reset to `init_velocity_std`), so one bad stretch cannot lock the filter
     /// out of every later update.
     pub reanchor_after: u32,
+    /// Whether radar velocity updates may correct the heading (world yaw) and the gyroscope bias
+    /// about the world vertical. Body-frame velocity cannot observe heading: rotating the state
+    /// about the vertical leaves every Doppler prediction unchanged, so what a radar update does
+    /// to the heading comes from linearisation error and model error (lever arm, mount, clock)
+    /// and makes it worse than the gyro alone. `false` (the default) takes those components out
+    /// of the radar updates' gain (a Schmidt "consider" update, kept consistent by the Joseph
+    /// form); rest updates still estimate the whole gyro bias.
+    pub radar_heading: bool,
+    /// Vertical velocity pseudo-measurement \[m/s\]: at a radar frame that sees the world
+    /// vertical velocity no better than this, or that gives no update at all, or when the filter
+    /// is that uncertain of it, the
+    /// filter takes "vertical velocity 0" with this standard deviation (walking and driving
+    /// rarely climb faster), so a frame that cannot see vertical motion cannot let it run away
+    /// (`f64::INFINITY`: never).
+    pub vertical_velocity_std: f64,
+    /// Uncertainty of a radar measurement's time on the IMU clock \[s\] (exposure spread,
+    /// clock mapping): the measurement covariance gains `J J^T sigma_t^2`, `J` the rate of change
+    /// of the predicted radar velocity (body acceleration, rotation of the body velocity, angular
+    /// acceleration on the lever arm), so fast motion on a long lever arm is not over-trusted.
+    pub time_sigma_s: f64,
 }
 
 impl Default for RioConfig {
@@ -65,6 +85,9 @@ impl Default for RioConfig {
             gate: 16.27,
             gravity: crate::strapdown::STANDARD_GRAVITY,
             reanchor_after: 5,
+            radar_heading: false,
+            vertical_velocity_std: 0.5,
+            time_sigma_s: 0.005,
         }
     }
 }
@@ -114,6 +137,26 @@ pub struct RioCounters {
     pub reanchors: u64,
     /// Zero-velocity and zero-rate pseudo-measurements applied at rest ([`crate::rest`]).
     pub rest_updates: u64,
+    /// Vertical velocity bounds applied ([`RioConfig::vertical_velocity_std`]).
+    pub vertical_bounds: u64,
+}
+
+/// What waits in the filter for the IMU to reach its time.
+#[derive(Debug, Clone, Copy)]
+enum Pending {
+    /// A radar velocity.
+    Velocity(VelocityMeasurement),
+    /// A radar frame without one.
+    Frame(f64),
+}
+
+impl Pending {
+    fn t(&self) -> f64 {
+        match self {
+            Pending::Velocity(m) => m.t,
+            Pending::Frame(t) => *t,
+        }
+    }
 }
 
 /// The filter.
@@ -124,7 +167,9 @@ pub struct Rio {
     nav: Strapdown,
     p: M15,
     last_gyro: Vector3<f64>,
-    pending: Vec<VelocityMeasurement>,
+    last_accel: Vector3<f64>,
+    angular_accel: Vector3<f64>,
+    pending: Vec<Pending>,
     counters: RioCounters,
     started: bool,
     gated_run: u32,
@@ -151,6 +196,8 @@ impl Rio {
             nav: Strapdown::new(state, cfg.gravity),
             p,
             last_gyro: Vector3::zeros(),
+            last_accel: Vector3::zeros(),
+            angular_accel: Vector3::zeros(),
             pending: Vec::new(),
             counters: RioCounters::default(),
             started: false,
@@ -202,7 +249,13 @@ impl Rio {
         let before = *self.nav.state();
         let rejected = self.nav.rejected;
         self.nav.push(s);
-        self.last_gyro = Vector3::from(s.gyro);
+        let gyro = Vector3::from(s.gyro);
+        let dt_s = self.nav.state().t - before.t;
+        if self.started && dt_s > 0.0 {
+            self.angular_accel = (gyro - self.last_gyro) / dt_s;
+        }
+        self.last_gyro = gyro;
+        self.last_accel = Vector3::from(s.accel);
         if !self.started {
             self.started = true;
             return;
@@ -215,9 +268,11 @@ impl Rio {
         self.propagate_cov(&before, &s, dt);
         let now = self.nav.state().t;
         // In queue order, without a temporary vector (the runtime's hot path allocates nothing).
-        while let Some(i) = self.pending.iter().position(|m| m.t <= now) {
-            let m = self.pending.remove(i);
-            self.update(&m);
+        while let Some(i) = self.pending.iter().position(|m| m.t() <= now) {
+            match self.pending.remove(i) {
+                Pending::Velocity(m) => self.update(&m),
+                Pending::Frame(_) => self.bound_vertical(true),
+            }
         }
     }
 
@@ -228,8 +283,39 @@ impl Rio {
             self.counters.late += u64::from(self.nav.state().t - m.t > 0.05);
             self.update(&m);
         } else {
-            self.pending.push(m);
+            self.pending.push(Pending::Velocity(m));
         }
+    }
+
+    /// A radar frame at `t` \[s\] (IMU clock) that gave no velocity: the vertical velocity bound
+    /// ([`RioConfig::vertical_velocity_std`]) is applied at its time, as after a frame's update.
+    pub fn push_frame_without_velocity(&mut self, t: f64) {
+        if self.started && t <= self.nav.state().t {
+            self.bound_vertical(true);
+        } else {
+            self.pending.push(Pending::Frame(t));
+        }
+    }
+
+    /// Vertical velocity bound: when the frame did not see the vertical velocity (`unseen`) or
+    /// the filter is uncertain of it by more than [`RioConfig::vertical_velocity_std`],
+    /// "vertical velocity 0" with that deviation.
+    fn bound_vertical(&mut self, unseen: bool) {
+        let std = self.cfg.vertical_velocity_std;
+        if !(std.is_finite() && std > 0.0) || !(unseen || self.p[(5, 5)] > std * std) {
+            return;
+        }
+        let mut h = SVector::<f64, 15>::zeros();
+        h[5] = 1.0;
+        let r = std * std;
+        let s = self.p[(5, 5)] + r;
+        let k: V15 = self.p.column(5) / s;
+        let y = -self.nav.state().v.z;
+        let ikh = M15::identity() - k * h.transpose();
+        self.p = ikh * self.p * ikh.transpose() + k * k.transpose() * r;
+        self.p = (self.p + self.p.transpose()) * 0.5;
+        self.inject(&(k * y));
+        self.counters.vertical_bounds += 1;
     }
 
     fn propagate_cov(&mut self, before: &NavState, s: &ImuSample, dt: f64) {
@@ -276,6 +362,27 @@ impl Rio {
         )
     }
 
+    /// What the measurement-time uncertainty adds to a radar velocity's covariance
+    /// ([`RioConfig::time_sigma_s`]).
+    fn timing_covariance(&self) -> Matrix3<f64> {
+        let ts = self.cfg.time_sigma_s;
+        if !(ts.is_finite() && ts > 0.0) {
+            return Matrix3::zeros();
+        }
+        let st = self.nav.state();
+        let r_wb = st.q.to_rotation_matrix().into_inner();
+        let r_br = self.mount.rotation.to_rotation_matrix().into_inner();
+        let w = self.last_gyro - self.nav.gyro_bias;
+        let v_b = r_wb.transpose() * st.v;
+        let g_b = r_wb.transpose() * Vector3::new(0.0, 0.0, -self.cfg.gravity);
+        // d/dt of R_br^T (v_b + w x t): body acceleration minus the rotation of v_b, plus the
+        // angular acceleration on the lever arm.
+        let a_b = self.last_accel - self.nav.accel_bias + g_b;
+        let j = r_br.transpose()
+            * (a_b - w.cross(&v_b) + self.angular_accel.cross(&self.mount.translation));
+        j * j.transpose() * (ts * ts)
+    }
+
     /// Predicted radar velocity and its Jacobian with respect to the error state.
     fn radar_model(&self) -> (Vector3<f64>, M3x15) {
         let st = self.nav.state();
@@ -297,11 +404,19 @@ impl Rio {
 
     fn update(&mut self, m: &VelocityMeasurement) {
         self.update_gated(m, true);
+        // How well this frame saw the world vertical velocity: its covariance rotated into the
+        // world frame.
+        let r_wr = (self.nav.state().q * self.mount.rotation)
+            .to_rotation_matrix()
+            .into_inner();
+        let c = r_wr * Matrix3::from_fn(|i, j| m.covariance[i][j]) * r_wr.transpose();
+        let std = self.cfg.vertical_velocity_std;
+        self.bound_vertical(c[(2, 2)] > std * std);
     }
 
     fn update_gated(&mut self, m: &VelocityMeasurement, gate: bool) {
         let (pred, h) = self.radar_model();
-        let rm = Matrix3::from_fn(|i, j| m.covariance[i][j]);
+        let rm = Matrix3::from_fn(|i, j| m.covariance[i][j]) + self.timing_covariance();
         let y = Vector3::from(m.velocity) - pred;
         let s = h * self.p * h.transpose() + rm;
         let Some(si) = s.try_inverse() else {
@@ -334,7 +449,7 @@ impl Rio {
             return self.update_gated(m, false);
         }
         self.gated_run = 0;
-        self.correct(&y, &h, &rm, &si);
+        self.correct(&y, &h, &rm, &si, !self.cfg.radar_heading);
         self.counters.updates += 1;
     }
 
@@ -346,6 +461,15 @@ impl Rio {
             .copy_from(&Matrix3::identity());
         let y = -self.nav.state().v;
         self.pseudo(&y, &h, std);
+    }
+
+    /// Whether the filter's velocity is consistent with rest: zero within its covariance plus
+    /// `std` \[m/s\] per axis, by the chi-square gate ([`RioConfig::gate`]).
+    pub fn at_rest_consistent(&self, std: f64) -> bool {
+        let v = self.nav.state().v;
+        let s = self.p.fixed_view::<3, 3>(3, 3) + Matrix3::identity() * (std * std);
+        s.try_inverse()
+            .is_some_and(|si| (v.transpose() * si * v)[(0, 0)] <= self.cfg.gate)
     }
 
     /// Position-hold pseudo-measurement: at rest the position is `anchor` \[m\] (where the rest
@@ -374,19 +498,43 @@ impl Rio {
         let rm = Matrix3::identity() * (std * std);
         let s = h * self.p * h.transpose() + rm;
         if let Some(si) = s.try_inverse() {
-            self.correct(y, h, &rm, &si);
+            self.correct(y, h, &rm, &si, false);
             self.counters.rest_updates += 1;
         }
     }
 
     /// The Kalman correction with innovation `y`, Jacobian `h`, measurement covariance `rm` and
     /// inverse innovation covariance `si` (Joseph form), folded into the nominal state.
-    fn correct(&mut self, y: &Vector3<f64>, h: &M3x15, rm: &Matrix3<f64>, si: &Matrix3<f64>) {
-        let k = self.p * h.transpose() * si;
+    /// `keep_heading`: the gain leaves the world yaw and the gyroscope bias about the world
+    /// vertical alone (see [`RioConfig::radar_heading`]).
+    fn correct(
+        &mut self,
+        y: &Vector3<f64>,
+        h: &M3x15,
+        rm: &Matrix3<f64>,
+        si: &Matrix3<f64>,
+        keep_heading: bool,
+    ) {
+        let mut k = self.p * h.transpose() * si;
+        if keep_heading {
+            // The world vertical in the body frame; project it out of the attitude and gyro-bias
+            // rows of the gain. Any gain is consistent under the Joseph form below.
+            let up = self.nav.state().q.inverse() * Vector3::z();
+            let keep = Matrix3::identity() - up * up.transpose();
+            for at in [6, 12] {
+                let rows = keep * k.fixed_rows::<3>(at);
+                k.fixed_rows_mut::<3>(at).copy_from(&rows);
+            }
+        }
         let dx: V15 = k * y;
         let ikh = M15::identity() - k * h;
         self.p = ikh * self.p * ikh.transpose() + k * rm * k.transpose();
         self.p = (self.p + self.p.transpose()) * 0.5;
+        self.inject(&dx);
+    }
+
+    /// Folds an error-state correction into the nominal state.
+    fn inject(&mut self, dx: &V15) {
         let mut ns = *self.nav.state();
         ns.p += dx.fixed_rows::<3>(0);
         ns.v += dx.fixed_rows::<3>(3);

@@ -179,6 +179,12 @@ pub struct RunnerCounters {
     /// Frames whose ego-velocity was not applied because the body was at rest (the
     /// zero-velocity update stands in).
     pub rest_frames: u64,
+    /// Radar points skipped as near-field leakage (zero Doppler within
+    /// [`EgoConfig::near_field_m`]).
+    pub near_field_points: u64,
+    /// Rests the filter refuted: its velocity was not consistent with zero
+    /// ([`crate::rest::RestDetector::refute`]).
+    pub rest_refuted: u64,
 }
 
 /// Radar frame seen while levelling, measured and applied once the filter starts.
@@ -469,8 +475,18 @@ impl Runner {
         let Some(rio) = self.rio.as_mut() else {
             return;
         };
+        let c = *self.rest.config();
+        let due = due.filter(|_| {
+            // A rest the filter's velocity contradicts is refuted, not applied.
+            let ok = rio.at_rest_consistent(c.zero_velocity_std);
+            if !ok {
+                self.rest.refute();
+                self.counters.rest_refuted += 1;
+                self.rest_anchor = None;
+            }
+            ok
+        });
         if let Some(u) = due {
-            let c = *self.rest.config();
             rio.zero_velocity(c.zero_velocity_std);
             if u.first || self.rest_anchor.is_none() {
                 self.rest_anchor = Some(rio.state().p);
@@ -539,14 +555,21 @@ impl Runner {
         let m = self.measure(t, dets, prior);
         // The radar's verdict on rest: its own estimate (before the filter takes it) and the
         // share of points with zero Doppler.
-        let zero = self.cfg.ego.sigma.abs();
-        let still = dets
-            .iter()
-            .filter(|d| d.radial_velocity.abs() <= zero)
-            .count();
-        let verdict =
-            self.rest
-                .push_radar(t, m.map(|m| (m.velocity, m.covariance)), still, dets.len());
+        // Near-field points are left out: leakage there has zero Doppler whatever the motion.
+        let zero = self.cfg.ego.doppler_std().abs();
+        let near2 = self.cfg.ego.near_field_m * self.cfg.ego.near_field_m;
+        let (mut still, mut seen) = (0, 0);
+        for d in dets {
+            let [x, y, z] = d.position;
+            if x * x + y * y + z * z >= near2 {
+                seen += 1;
+                still += usize::from(d.radial_velocity.abs() <= zero);
+            }
+        }
+        self.counters.near_field_points += self.est.near_field as u64;
+        let verdict = self
+            .rest
+            .push_radar(t, m.map(|m| (m.velocity, m.covariance)), still, seen);
         // At rest the zero-velocity update replaces the frame's: the radar's own estimate is poor
         // where its points do not spread (vertical velocity of a horizontal fan), the rest exact.
         // Rest and stillness as decided at the sample before the last one at or before the frame
@@ -555,7 +578,9 @@ impl Runner {
         // that says "still" while the IMU is still starts the rest.
         let resting = self.rest.resting_before_frame(behind);
         let still = self.rest.was_still(behind);
-        let m = if verdict != Verdict::Moving && (resting || (still && verdict == Verdict::Still)) {
+        let resting_now =
+            verdict != Verdict::Moving && (resting || (still && verdict == Verdict::Still));
+        let m = if resting_now {
             self.counters.rest_frames += u64::from(m.is_some());
             // The frame agrees with the filter (zero velocity): the rejection run ends.
             self.rejected_in_row = 0;
@@ -563,11 +588,17 @@ impl Runner {
         } else {
             m
         };
-        if let (Some(m), Some(rio)) = (m, self.rio.as_mut()) {
-            let before = *rio.counters();
-            rio.push_velocity(m);
-            let after = *rio.counters();
-            self.track(before, after);
+        let at_rest = resting_now;
+        if let Some(rio) = self.rio.as_mut() {
+            if let Some(m) = m {
+                let before = *rio.counters();
+                rio.push_velocity(m);
+                let after = *rio.counters();
+                self.track(before, after);
+            } else if !at_rest {
+                // No velocity from this frame: the vertical velocity bound still applies.
+                rio.push_frame_without_velocity(t);
+            }
         }
         if matches!(self.est.status, Status::NoConsensus { .. }) {
             // No consensus under the prior: the frame disagrees with the filter.

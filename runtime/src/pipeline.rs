@@ -218,7 +218,10 @@ impl Plan {
         let mut session = None;
         let mut radar_decoding = DecoderConfig::default();
         let mut apply_cfg = |cfg: &mut RunConfig, d: &radar_driver::cfg::Derived| {
-            cfg.classical.ego.sigma = d.velocity_resolution_mps as f32 / 2.0;
+            cfg.classical.ego = cfg
+                .classical
+                .ego
+                .with_velocity_resolution(d.velocity_resolution_mps);
             cfg.sync.radar_period_s = Some(d.frame_period_ms / 1e3);
             cfg.sync.half_chirps_s = d.active_frame_time_ms / 2e3;
             radar_decoding = DecoderConfig::from_derived(Some(d));

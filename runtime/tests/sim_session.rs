@@ -149,16 +149,10 @@ fn offline_run_reproduces_milliego_odometry() {
     let summary = run(&input, &cfg, Arc::new(AtomicBool::new(false))).expect("run");
     assert_eq!(summary.dropped_total, 0, "sessions are fed without drops");
     let mut ours = read_tum(&out);
-    // `milliego odometry` with its defaults (Doppler noise from the .cfg).
-    let mut ocfg = OfflineConfig::default();
-    let vres = s
-        .radar_cfg()
+    // `milliego odometry` with its defaults (the Doppler step from the .cfg, as the runtime).
+    let theirs = run_offline(&s, &OfflineConfig::default())
         .unwrap()
-        .and_then(|t| radar_driver::cfg::RadarConfig::parse(&t).ok())
-        .and_then(|c| c.derive(None).ok())
-        .map(|d| d.velocity_resolution_mps as f32);
-    ocfg.ego.sigma = vres.unwrap() / 2.0;
-    let theirs = run_offline(&s, &ocfg).unwrap().trajectory;
+        .trajectory;
     // The runtime has no pose during the 1 s levelling window; every later pose is the same
     // (frames after the last IMU sample, which the offline runner leaves out, aside).
     let last = theirs.last().unwrap().t;
