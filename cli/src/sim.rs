@@ -70,14 +70,14 @@ struct RunArgs {
     /// Seconds at rest at the end (the motion ramps down over 1.5 s before).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     rest_end: f64,
-    /// Radar origin in the body frame, X,Y,Z [m] (x forward, y left, z up; each within ±2 m);
+    /// Radar origin in the body frame, X,Y,Z in m (x forward, y left, z up; each within ±2 m);
     /// default: the motion's own mount, a few cm ahead.
     #[arg(long, value_parser = parse_xyz, allow_negative_numbers = true)]
     radar_lever: Option<[f64; 3]>,
-    /// Radar boresight yawed about body z [deg], ±180 (positive: left).
+    /// Radar boresight yawed about body z in degrees, ±180 (positive: left).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     radar_yaw: f64,
-    /// Radar boresight tilted up about the radar's x axis [deg], ±60.
+    /// Radar boresight tilted up about the radar's x axis in degrees, ±60.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     radar_tilt: f64,
     /// Coarse Doppler: radial velocities in multiples of this step [m/s] (0: off; 0.01-2).
@@ -93,10 +93,10 @@ struct RunArgs {
     /// Share of IMU messages dropped in bursts, counter and sample time jumping (0: off; up to 0.8).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     imu_gaps: f64,
-    /// Barometer rate [Hz]: BaroPressure messages in the IMU stream (0: off; 1-100, e.g. 50).
+    /// Barometer rate in Hz: BaroPressure messages in the IMU stream (0: off; 1-100, e.g. 50).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     baro_hz: f64,
-    /// Height change over a handheld or headworn walk [m] (negative: descend; 0: flat; ±10 m,
+    /// Height change over a handheld or headworn walk in m (negative: descend; 0: flat; ±10 m,
     /// peak vertical speed at most 0.5 m/s).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     height_change: f64,
