@@ -82,6 +82,29 @@ pub fn cfg_text_outdoor(frame_hz: f64) -> String {
         .replace("cfarFovCfg -1 0 0.25 10.0", "cfarFovCfg -1 0 0.25 40.0")
 }
 
+/// The chirp configuration of a car outdoors: short chirps so that car speeds do not alias.
+/// 30 MHz/µs, 128 samples at 8 Msps (0.48 GHz sampled: 31 cm range bins, 40 m max range),
+/// idle 5 µs + ramp end 22 µs per chirp, 64 loops x 3 TX: 81 µs per loop, ±12 m/s in 0.375 m/s
+/// Doppler bins; the CFAR windows opened to 40 m and ±12 m/s.
+pub fn cfg_text_vehicle(frame_hz: f64) -> String {
+    cfg_text(frame_hz)
+        .replace(
+            "% 60 MHz/us x 62.5 us sampled = 3.75 GHz: 4.0 cm range bins, 10.24 m max range (complex 1x)",
+            "% vehicle: 30 MHz/us x 16 us sampled = 0.48 GHz: 31 cm range bins, 40 m max range (complex 1x)",
+        )
+        .replace(
+            "% 64 loops x 3 TX, Tc = 73.5 us: 0.134 m/s Doppler bins, +-4.3 m/s",
+            "% 64 loops x 3 TX, Tc = 27 us: 0.375 m/s Doppler bins, +-12 m/s",
+        )
+        .replace(
+            "profileCfg 0 77 7 3 66.5 0 0 60 1 256 4096 0 0 30",
+            "profileCfg 0 77 5 3 22 0 0 30 1 128 8000 0 0 30",
+        )
+        .replace("cfarFovCfg -1 0 0.25 10.0", "cfarFovCfg -1 0 0.25 40.0")
+        .replace("cfarFovCfg -1 1 -4.3 4.3", "cfarFovCfg -1 1 -12.0 12.0")
+        .replace("calibDcRangeSig -1 0 -5 8 256", "calibDcRangeSig -1 0 -5 8 128")
+}
+
 /// Why a point is in the cloud.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum PointClass {
@@ -167,6 +190,8 @@ pub struct RadarModel {
     pub ray_step_deg: f64,
     /// Farthest return modelled \[m\] (also capped by the .cfg's maximum range).
     pub max_range_m: f64,
+    /// One chirp's time, idle + ramp end \[s\] (as the .cfg's profileCfg sets it).
+    pub chirp_time_s: f64,
     /// Coarse Doppler: reported radial velocities are multiples of this step \[m/s\] instead of
     /// the .cfg's Doppler bin (0: off, the bin).
     pub doppler_step_mps: f64,
@@ -186,6 +211,17 @@ impl RadarModel {
         m.max_range_m = 40.0;
         m.outlier_share = 0.4;
         m.min_points = 3;
+        Ok(m)
+    }
+
+    /// The model for a car outdoors at `frame_hz` \[Hz\] (10-30): [`RadarModel::outdoor`] with the
+    /// short-chirp .cfg of [`cfg_text_vehicle`] (±12 m/s unambiguous Doppler).
+    pub fn vehicle(frame_hz: f64) -> Result<RadarModel, SimError> {
+        let mut m = RadarModel::with_cfg(frame_hz, cfg_text_vehicle)?;
+        m.max_range_m = 40.0;
+        m.outlier_share = 0.4;
+        m.min_points = 3;
+        m.chirp_time_s = 27e-6;
         Ok(m)
     }
 
@@ -222,6 +258,7 @@ impl RadarModel {
             noise_floor_db: 52.0,
             ray_step_deg: 2.0,
             max_range_m: 10.0,
+            chirp_time_s: 73.5e-6,
             doppler_step_mps: 0.0,
         })
     }
@@ -234,7 +271,7 @@ impl RadarModel {
     /// Time the chirps of one frame take \[s\].
     pub fn active_time_s(&self) -> f64 {
         // Tc = idle 7 us + ramp end 66.5 us, per chirp.
-        f64::from(self.derived.chirps_per_frame) * 73.5e-6
+        f64::from(self.derived.chirps_per_frame) * self.chirp_time_s
     }
 
     /// Doppler standard deviation the points carry: noise and quantisation \[m/s\].
@@ -572,5 +609,21 @@ mod tests {
             .derived
             .velocity_resolution_mps;
         assert!((o.derived.velocity_resolution_mps / q - 1.0).abs() < 0.03);
+        let v = RadarModel::vehicle(20.0).unwrap();
+        assert!(
+            v.derived.max_velocity_mps > 11.5,
+            "{}",
+            v.derived.max_velocity_mps
+        );
+        assert!(v.derived.max_range_m >= 40.0, "{}", v.derived.max_range_m);
+        assert!((v.derived.range_resolution_m - 0.31).abs() < 0.01);
+        for m in [v, RadarModel::new(20.0).unwrap()] {
+            let a = m.derived.active_frame_time_ms * 1e-3;
+            assert!(
+                (m.active_time_s() - a).abs() < 1e-9,
+                "{} vs {a}",
+                m.active_time_s()
+            );
+        }
     }
 }

@@ -129,7 +129,9 @@ impl Scenario {
 
     /// The radar model these settings give.
     pub fn radar_model(&self) -> Result<RadarModel, SimError> {
-        let mut m = if self.family == Family::Outdoor {
+        let mut m = if self.motion == MotionKind::Vehicle {
+            RadarModel::vehicle(self.radar_hz)?
+        } else if self.family == Family::Outdoor {
             RadarModel::outdoor(self.radar_hz)?
         } else {
             RadarModel::new(self.radar_hz)?

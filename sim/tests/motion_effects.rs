@@ -17,6 +17,30 @@ fn vehicle_drives_without_side_slip_at_car_speeds() {
         let (frames, c) = decode_radar(&s.session);
         assert_eq!(c.frames_bad_total(), 0);
         assert!(!frames.is_empty());
+        // The short-chirp .cfg: car speeds do not alias, so inlier Doppler is the truth's.
+        let model = s.scenario.radar_model().unwrap();
+        assert!(model.derived.max_velocity_mps > 11.5);
+        let truth = common::radar_truth(&s.path());
+        let res: Vec<f64> = truth
+            .iter()
+            .filter(|r| r.class == "inlier")
+            .map(|r| f64::from(r.xyzv[3]) - r.true_v)
+            .collect();
+        let fastest = truth
+            .iter()
+            .filter(|r| r.class == "inlier")
+            .fold(0.0f64, |a, r| a.max(r.true_v.abs()));
+        let doppler_rms = (res.iter().map(|x| x * x).sum::<f64>() / res.len() as f64).sqrt();
+        eprintln!(
+            "vehicle {seed}: {} inliers, fastest {fastest:.2} m/s, Doppler error rms {doppler_rms:.3} m/s (sigma {:.3})",
+            res.len(),
+            model.doppler_sigma_mps()
+        );
+        assert!(fastest > 5.0, "{fastest}");
+        assert!(
+            doppler_rms < 1.3 * model.doppler_sigma_mps(),
+            "{doppler_rms}"
+        );
         let gt = Gt::load(&s.session);
         let world = World::generate_vehicle_lot(seed);
         let (mut lat, mut vert, mut speeds) = (Vec::new(), Vec::new(), Vec::new());
