@@ -304,12 +304,9 @@ impl Scenario {
         if self.doppler_step_mps > 0.0 {
             let _ = write!(extra, "; Doppler in {} m/s steps", self.doppler_step_mps);
         }
-        match ImuGrade::of(&self.imu_spec) {
-            Some(ImuGrade::Mti1) => {}
-            Some(g) => {
-                let _ = write!(extra, "; IMU grade {g}");
-            }
-            None => extra.push_str("; custom IMU noise"),
+        // A custom noise spec says nothing (as before the grades existed).
+        if let Some(g) = ImuGrade::of(&self.imu_spec).filter(|&g| g != ImuGrade::Mti1) {
+            let _ = write!(extra, "; IMU grade {g}");
         }
         if self.imu_gap_share > 0.0 {
             let _ = write!(
