@@ -1,0 +1,165 @@
+//! Serial stream -> hub messages: COBS frames delimited by 0x00.
+
+use crate::cobs::{self, CobsError};
+use crate::message::{DecodeError, Message};
+
+/// What one [`Deframer::poll`] produced.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Event<'a> {
+    /// A good message (borrows the deframer).
+    Message(Message<'a>),
+    /// A frame was dropped (its bytes are counted in [`DeframerCounters::bytes_dropped`]).
+    BadFrame(FrameError),
+    /// The input is used up.
+    NeedMore,
+}
+
+/// Why a serial frame was dropped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameError {
+    /// COBS did not decode.
+    Cobs(CobsError),
+    /// COBS decoded, the message did not.
+    Message(DecodeError),
+    /// The frame grew beyond the buffer before its delimiter.
+    Overflow {
+        /// Bytes discarded up to the delimiter \[B\].
+        dropped: usize,
+    },
+}
+
+impl FrameError {
+    /// Stable snake_case name of the error kind (for counters and summaries).
+    pub fn kind_name(&self) -> &'static str {
+        match self {
+            FrameError::Cobs(_) => "bad_cobs",
+            FrameError::Message(e) => e.kind_name(),
+            FrameError::Overflow { .. } => "overflow",
+        }
+    }
+}
+
+impl core::fmt::Display for FrameError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            FrameError::Cobs(e) => write!(f, "{e}"),
+            FrameError::Message(e) => write!(f, "{e}"),
+            FrameError::Overflow { dropped } => {
+                write!(f, "frame longer than the buffer: {dropped} B dropped")
+            }
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for FrameError {}
+
+/// Counters since the deframer was created.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct DeframerCounters {
+    /// Bytes consumed \[B\].
+    pub bytes_in: u64,
+    /// Messages decoded.
+    pub messages_ok: u64,
+    /// Frames that failed COBS decoding.
+    pub frames_bad_cobs: u64,
+    /// Frames whose message failed to decode (CRC, version, kind, length).
+    pub frames_bad_message: u64,
+    /// Frames longer than the buffer.
+    pub frames_overflow: u64,
+    /// Bytes of dropped frames (delimiters included) \[B\].
+    pub bytes_dropped: u64,
+    /// Empty frames (consecutive delimiters), ignored.
+    pub empty_frames: u64,
+}
+
+/// Accumulates a byte stream and releases a message at each 0x00 delimiter. `N` bounds one
+/// encoded frame: [`crate::serial_len_max`]`(largest body)` (the host uses [`crate::FRAME_MAX`]).
+#[derive(Debug)]
+pub struct Deframer<const N: usize> {
+    buf: [u8; N],
+    msg: [u8; N],
+    len: usize,
+    overflow: usize,
+    counters: DeframerCounters,
+}
+
+impl<const N: usize> Default for Deframer<N> {
+    fn default() -> Self {
+        Deframer {
+            buf: [0; N],
+            msg: [0; N],
+            len: 0,
+            overflow: 0,
+            counters: DeframerCounters::default(),
+        }
+    }
+}
+
+impl<const N: usize> Deframer<N> {
+    /// Counters so far.
+    pub fn counters(&self) -> &DeframerCounters {
+        &self.counters
+    }
+
+    /// Bytes held for an unfinished frame \[B\].
+    pub fn buffered(&self) -> usize {
+        self.len + self.overflow
+    }
+
+    /// Consumes bytes from `input` (advancing it) up to the next complete frame.
+    pub fn poll(&mut self, input: &mut &[u8]) -> Event<'_> {
+        while let Some((&b, rest)) = input.split_first() {
+            *input = rest;
+            self.counters.bytes_in += 1;
+            if b != 0 {
+                if self.len < N {
+                    self.buf[self.len] = b;
+                    self.len += 1;
+                } else {
+                    self.overflow += 1;
+                }
+                continue;
+            }
+            let frame_bytes = self.len + self.overflow + 1;
+            if self.overflow > 0 {
+                self.counters.frames_overflow += 1;
+                self.counters.bytes_dropped += frame_bytes as u64;
+                self.len = 0;
+                self.overflow = 0;
+                return Event::BadFrame(FrameError::Overflow {
+                    dropped: frame_bytes,
+                });
+            }
+            if self.len == 0 {
+                self.counters.empty_frames += 1;
+                continue;
+            }
+            let result = cobs::decode(&self.buf[..self.len], &mut self.msg);
+            self.len = 0;
+            let err = match result {
+                Err(e) => {
+                    self.counters.frames_bad_cobs += 1;
+                    FrameError::Cobs(e)
+                }
+                Ok(n) => match Message::decode(&self.msg[..n]) {
+                    Ok(_) => {
+                        self.counters.messages_ok += 1;
+                        // Decoded twice so the returned borrow is of `self.msg` alone.
+                        return match Message::decode(&self.msg[..n]) {
+                            Ok(m) => Event::Message(m),
+                            Err(e) => Event::BadFrame(FrameError::Message(e)),
+                        };
+                    }
+                    Err(e) => {
+                        self.counters.frames_bad_message += 1;
+                        FrameError::Message(e)
+                    }
+                },
+            };
+            self.counters.bytes_dropped += frame_bytes as u64;
+            return Event::BadFrame(err);
+        }
+        Event::NeedMore
+    }
+}
