@@ -44,6 +44,13 @@ pub struct OdometryArgs {
     /// worse than the gyro alone; see docs/odometry.md).
     #[arg(long)]
     radar_heading: bool,
+    /// Ignore the barometer readings in the IMU stream (by default they aid the height).
+    #[arg(long)]
+    no_barometer: bool,
+    /// Vertical velocity bound in m/s: at frames that cannot see vertical motion, "vertical
+    /// velocity 0" with this deviation (default 0.5; 0 turns it off).
+    #[arg(long)]
+    vertical_bound: Option<f64>,
 }
 
 pub fn run(a: OdometryArgs) -> Result<()> {
@@ -63,6 +70,10 @@ pub fn run(a: OdometryArgs) -> Result<()> {
         cfg.doppler_step_from_cfg = false;
     }
     cfg.rio.radar_heading = a.radar_heading;
+    cfg.use_barometer = !a.no_barometer;
+    if let Some(v) = a.vertical_bound {
+        cfg.rio.vertical_velocity_std = if v > 0.0 { v } else { f64::INFINITY };
+    }
     if let Some(m) = a.near_field {
         cfg.ego.near_field_m = m;
     }
@@ -74,10 +85,11 @@ pub fn run(a: OdometryArgs) -> Result<()> {
             "session": a.session.display().to_string(), "estimator": format!("{:?}", a.estimator).to_lowercase(),
             "poses": r.trajectory.len(), "radar_frames": r.radar_frames, "imu_samples": r.imu_samples,
             "ego_velocity": {"ok": r.ego_ok, "degenerate": r.ego_degenerate, "too_few_points": r.ego_too_few, "no_consensus": r.ego_no_consensus},
-            "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "vertical_bounds": r.vertical_bounds},
+            "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "vertical_bounds": r.vertical_bounds, "nis_mean": r.nis_mean},
+            "barometer": if r.pressure_readings == 0 { json!("none in the session: height from radar and IMU only") } else if a.no_barometer { json!(format!("{} readings ignored (--no-barometer)", r.pressure_readings)) } else { json!({"readings": r.pressure_readings, "updates": r.baro_updates, "rejected": r.baro_rejected}) },
             "near_field_points": r.near_field_points,
             "radar_stream": {"frames_bad": r.radar.bad, "bytes_skipped": r.radar.bytes_skipped},
-            "imu_stream": {"frames_bad": r.imu.bad, "bytes_skipped": r.imu.bytes_skipped, "not_samples": r.imu.not_samples},
+            "imu_stream": {"frames_bad": r.imu.bad, "bytes_skipped": r.imu.bytes_skipped, "not_samples": r.imu.not_samples, "pressure": r.imu.pressure},
             "clock_unsynced": r.clock_unsynced,
             "radar_clock": r.radar_clock.map(|c| json!({"offset_s": c.offset, "rate": c.rate, "residual_rms_s": c.residual_rms})),
             "imu_clock": r.imu_clock.map(|c| json!({"offset_s": c.offset, "rate": c.rate, "residual_rms_s": c.residual_rms})),

@@ -166,14 +166,19 @@ mod tests {
         let mut got = Vec::new();
         d.feed(&m, 0u32, |s| got.push((s.accel, s.gyro, s.sensor_s)));
         let p = pressure_message(4, 1.5, 101_325.4);
-        d.feed(&p, 1u32, |_| {
-            panic!("a pressure message is not an IMU sample")
-        });
+        let mut baro = Vec::new();
+        d.feed_with_pressure(
+            &p,
+            1u32,
+            |_| panic!("a pressure message is not an IMU sample"),
+            |b| baro.push((b.pa, b.sensor_s)),
+        );
+        assert_eq!(baro, [(101_325.0, 1.5)], "whole pascals at their time");
         assert_eq!(got.len(), 1);
         assert_eq!(got[0].0, [0.1, -0.2, 9.81]);
         assert_eq!(got[0].1, [0.01, 0.02, -0.03]);
         assert!((got[0].2 - 1.2346).abs() < 1e-9, "{}", got[0].2);
-        assert_eq!(d.report().not_samples, 1);
+        assert_eq!((d.report().pressure, d.report().not_samples), (1, 0));
     }
 
     #[test]

@@ -942,6 +942,8 @@ pub struct Sample {
     pub free_acceleration: Option<[f64; 3]>,
     /// Temperature \[°C\].
     pub temperature: Option<f64>,
+    /// Barometric pressure \[Pa\].
+    pub pressure_pa: Option<f64>,
     /// Status word (a status byte is widened).
     pub status: Option<u32>,
     /// True when the message carries a GNSS PVT record (its time runs behind the inertial
@@ -969,6 +971,7 @@ impl Sample {
             Value::EulerAngles(e) => self.euler_angles = Some(e),
             Value::FreeAcceleration(a) => self.free_acceleration = Some(a),
             Value::Temperature(t) => self.temperature = Some(t),
+            Value::BaroPressure(p) => self.pressure_pa = Some(f64::from(p)),
             Value::StatusWord(s) => self.status = Some(s),
             Value::StatusByte(s) => self.status = Some(u32::from(s)),
             Value::GnssPvtData(_) => self.has_gnss_pvt = true,

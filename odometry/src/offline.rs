@@ -8,7 +8,9 @@ use crate::rest::RestConfig;
 use crate::rio::RioConfig;
 use crate::runner::{ClassicalConfig, FrameInput, Mounting, Runner};
 use crate::strapdown::ImuSample;
-use milliego_session::streams::{imu_samples, radar_frames, ClockFit, SessionClock, StreamReport};
+use milliego_session::streams::{
+    imu_and_pressure, radar_frames, ClockFit, SessionClock, StreamReport,
+};
 use milliego_session::{Session, SessionError, TumPose};
 
 /// Which estimator to run.
@@ -40,6 +42,8 @@ pub struct OfflineConfig {
     /// Take the Doppler quantisation step ([`EgoConfig::doppler_step`]) from the session's
     /// `.cfg` (its velocity resolution) when it has one.
     pub doppler_step_from_cfg: bool,
+    /// Aid the height with the barometer readings in the IMU stream, when there are any.
+    pub use_barometer: bool,
 }
 
 impl Default for OfflineConfig {
@@ -54,6 +58,7 @@ impl Default for OfflineConfig {
             velocity_cov_scale: c.velocity_cov_scale,
             rest: c.rest,
             doppler_step_from_cfg: true,
+            use_barometer: true,
         }
     }
 }
@@ -87,6 +92,14 @@ pub struct OfflineResult {
     pub rest_updates: u64,
     /// Vertical velocity bounds applied ([`RioConfig::vertical_velocity_std`]).
     pub vertical_bounds: u64,
+    /// Mean normalised innovation square of the applied radar updates (3 when consistent).
+    pub nis_mean: Option<f64>,
+    /// Barometer readings in the session.
+    pub pressure_readings: usize,
+    /// Barometric heights applied and rejected by the filter.
+    pub baro_updates: u64,
+    /// Barometric heights rejected (gate, or not finite).
+    pub baro_rejected: u64,
     /// Radar points that did not vote as possible near-field leakage
     /// ([`EgoConfig::near_field_m`]).
     pub near_field_points: u64,
@@ -132,7 +145,7 @@ impl From<SessionError> for OfflineError {
 /// or after the last IMU sample get no pose.
 pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, OfflineError> {
     let (frames, radar_rep) = radar_frames(session)?;
-    let (imu, imu_rep) = imu_samples(session)?;
+    let (imu, baro, imu_rep) = imu_and_pressure(session)?;
     if imu.is_empty() {
         return Err(OfflineError::Missing(
             "IMU samples (acceleration, rate of turn, SampleTimeFine)",
@@ -189,8 +202,18 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
         }
     };
     let mut next = 0;
+    let mut next_baro = 0;
     for s in &imu {
         let t = clock.imu_s(s.sensor_s);
+        // Barometer readings due at or before this sample, in the stream's order (they share
+        // the IMU's clock and stream).
+        while next_baro < baro.len() && clock.imu_s(baro[next_baro].sensor_s) <= t {
+            let b = &baro[next_baro];
+            next_baro += 1;
+            if cfg.use_barometer {
+                runner.push_pressure(clock.imu_s(b.sensor_s), b.pa);
+            }
+        }
         while next < radar_times.len() && radar_times[next].0 <= t {
             let (tr, i) = radar_times[next];
             next += 1;
@@ -226,6 +249,10 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
         rest_samples: c.rest_samples,
         rest_updates: filter.rest_updates,
         vertical_bounds: filter.vertical_bounds,
+        nis_mean: runner.filter().and_then(|f| f.nis_mean()),
+        pressure_readings: baro.len(),
+        baro_updates: filter.baro_updates,
+        baro_rejected: filter.baro_rejected,
         near_field_points: c.near_field_points,
         imu_samples: imu.len(),
         radar_clock,

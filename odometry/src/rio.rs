@@ -2,8 +2,10 @@
 //! ([`crate::strapdown`]) and updates with radar ego-velocity ([`crate::ego_velocity`]).
 //!
 //! Nominal state: position `p` and velocity `v` in the world frame, body-to-world rotation `q`,
-//! accelerometer bias `b_a`, gyroscope bias `b_g` (body = IMU frame). Error state (15): `dp, dv,
-//! dtheta` (body-frame rotation error, `q = q_hat * Exp(dtheta)`), `db_a`, `db_g`.
+//! accelerometer bias `b_a`, gyroscope bias `b_g` (body = IMU frame), and, once a barometer
+//! reading came, the barometer bias `b_h` (barometric height minus the filter's). Error state
+//! (16): `dp, dv, dtheta` (body-frame rotation error, `q = q_hat * Exp(dtheta)`), `db_a`, `db_g`,
+//! `db_h` (zero variance until a barometer reading comes).
 //!
 //! Measurement: the radar's velocity in its own frame,
 //! `h(x) = R_br^T (R^T v + (omega - b_g) x t_br)`, where `R_br`, `t_br` place the radar in the
@@ -17,9 +19,13 @@
 use crate::strapdown::{ImuSample, NavState, Strapdown};
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
 
-type M15 = SMatrix<f64, 15, 15>;
-type V15 = SVector<f64, 15>;
-type M3x15 = SMatrix<f64, 3, 15>;
+/// Error-state size: 15 inertial states and the barometer bias.
+const N: usize = 16;
+/// Index of the barometer bias in the error state.
+const BARO: usize = 15;
+type Mn = SMatrix<f64, N, N>;
+type Vn = SVector<f64, N>;
+type M3xN = SMatrix<f64, 3, N>;
 
 /// Noise densities and initial uncertainties.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -68,6 +74,10 @@ pub struct RioConfig {
     /// of the predicted radar velocity (body acceleration, rotation of the body velocity, angular
     /// acceleration on the lever arm), so fast motion on a long lever arm is not over-trusted.
     pub time_sigma_s: f64,
+    /// Barometric height noise \[m\] (white, per reading).
+    pub baro_std_m: f64,
+    /// Barometer bias random walk \[m/sqrt(s)\] (weather, temperature).
+    pub baro_bias_walk: f64,
 }
 
 impl Default for RioConfig {
@@ -88,6 +98,8 @@ impl Default for RioConfig {
             radar_heading: false,
             vertical_velocity_std: 0.5,
             time_sigma_s: 0.005,
+            baro_std_m: 0.3,
+            baro_bias_walk: 0.02,
         }
     }
 }
@@ -139,6 +151,19 @@ pub struct RioCounters {
     pub rest_updates: u64,
     /// Vertical velocity bounds applied ([`RioConfig::vertical_velocity_std`]).
     pub vertical_bounds: u64,
+    /// Barometric heights applied.
+    pub baro_updates: u64,
+    /// Barometric heights rejected (not finite, or outside a 99.9% gate).
+    pub baro_rejected: u64,
+}
+
+/// Chi-square gate for one degree of freedom (99.9%).
+const GATE_1DOF: f64 = 10.83;
+
+/// Altitude \[m\] of pressure `pa` \[Pa\] in the standard atmosphere
+/// (`44330.8 (1 - (p / 101325)^0.190263)`); only differences matter to the filter.
+pub fn pressure_altitude(pa: f64) -> f64 {
+    (1.0 - (pa / 101_325.0).powf(1.0 / 5.25588)) / 2.25577e-5
 }
 
 /// What waits in the filter for the IMU to reach its time.
@@ -148,13 +173,15 @@ enum Pending {
     Velocity(VelocityMeasurement),
     /// A radar frame without one.
     Frame(f64),
+    /// A barometric height \[m\] at its time.
+    Height(f64, f64),
 }
 
 impl Pending {
     fn t(&self) -> f64 {
         match self {
             Pending::Velocity(m) => m.t,
-            Pending::Frame(t) => *t,
+            Pending::Frame(t) | Pending::Height(t, _) => *t,
         }
     }
 }
@@ -165,7 +192,7 @@ pub struct Rio {
     cfg: RioConfig,
     mount: RadarMount,
     nav: Strapdown,
-    p: M15,
+    p: Mn,
     last_gyro: Vector3<f64>,
     last_accel: Vector3<f64>,
     angular_accel: Vector3<f64>,
@@ -173,13 +200,17 @@ pub struct Rio {
     counters: RioCounters,
     started: bool,
     gated_run: u32,
+    /// Sum of the applied radar updates' normalised innovation squares (3 dof each).
+    nis_sum: f64,
+    /// Barometer bias \[m\] (barometric height minus the filter's), once a reading came.
+    baro_bias: Option<f64>,
 }
 
 impl Rio {
     /// A filter starting from `state` (biases zero) with the radar at `mount`.
     pub fn new(cfg: RioConfig, mount: RadarMount, state: NavState) -> Rio {
-        let mut p = M15::zeros();
-        let set = |p: &mut M15, at: usize, s: f64| {
+        let mut p = Mn::zeros();
+        let set = |p: &mut Mn, at: usize, s: f64| {
             for k in at..at + 3 {
                 p[(k, k)] = s * s;
             }
@@ -202,6 +233,8 @@ impl Rio {
             counters: RioCounters::default(),
             started: false,
             gated_run: 0,
+            nis_sum: 0.0,
+            baro_bias: None,
         }
     }
 
@@ -235,13 +268,20 @@ impl Rio {
     }
 
     /// Error-state covariance (order: p, v, theta, b_a, b_g).
-    pub fn covariance(&self) -> &M15 {
+    pub fn covariance(&self) -> &Mn {
         &self.p
     }
 
     /// Counters.
     pub fn counters(&self) -> &RioCounters {
         &self.counters
+    }
+
+    /// Mean normalised innovation square of the applied radar updates (3 for a consistent
+    /// filter; larger: the measurements' covariance or the model is too optimistic). `None`
+    /// before the first update.
+    pub fn nis_mean(&self) -> Option<f64> {
+        (self.counters.updates > 0).then(|| self.nis_sum / self.counters.updates as f64)
     }
 
     /// Propagates with one IMU sample, then applies any radar measurement now due.
@@ -272,6 +312,7 @@ impl Rio {
             match self.pending.remove(i) {
                 Pending::Velocity(m) => self.update(&m),
                 Pending::Frame(_) => self.bound_vertical(true),
+                Pending::Height(_, h) => self.height_update(h),
             }
         }
     }
@@ -305,24 +346,75 @@ impl Rio {
         if !(std.is_finite() && std > 0.0) || !(unseen || self.p[(5, 5)] > std * std) {
             return;
         }
-        let mut h = SVector::<f64, 15>::zeros();
+        let mut h = Vn::zeros();
         h[5] = 1.0;
-        let r = std * std;
-        let s = self.p[(5, 5)] + r;
-        let k: V15 = self.p.column(5) / s;
-        let y = -self.nav.state().v.z;
-        let ikh = M15::identity() - k * h.transpose();
+        self.scalar_update(&h, -self.nav.state().v.z, std * std);
+        self.counters.vertical_bounds += 1;
+    }
+
+    /// A scalar measurement: innovation `y`, Jacobian row `h`, variance `r` (Joseph form).
+    /// Returns the normalised innovation square.
+    fn scalar_update(&mut self, h: &Vn, y: f64, r: f64) -> f64 {
+        let ph = self.p * h;
+        let s = h.dot(&ph) + r;
+        let k: Vn = ph / s;
+        let ikh = Mn::identity() - k * h.transpose();
         self.p = ikh * self.p * ikh.transpose() + k * k.transpose() * r;
         self.p = (self.p + self.p.transpose()) * 0.5;
         self.inject(&(k * y));
-        self.counters.vertical_bounds += 1;
+        y * y / s
+    }
+
+    /// A barometric height \[m\] at `t` \[s\] (IMU clock; the altitude of the pressure in the
+    /// standard atmosphere, [`pressure_altitude`]): applied when the IMU reaches `t`, at once
+    /// if it is already past. The first reading sets the barometer bias (height is relative:
+    /// the world origin is where the filter started); later ones aid the height with the bias
+    /// as a random-walk state ([`RioConfig::baro_std_m`], [`RioConfig::baro_bias_walk`]).
+    pub fn push_height(&mut self, t: f64, height_m: f64) {
+        if !height_m.is_finite() {
+            self.counters.baro_rejected += 1;
+            return;
+        }
+        if self.started && t <= self.nav.state().t {
+            self.height_update(height_m);
+        } else {
+            self.pending.push(Pending::Height(t, height_m));
+        }
+    }
+
+    fn height_update(&mut self, height_m: f64) {
+        let z = self.nav.state().p.z;
+        let Some(bias) = self.baro_bias else {
+            // First reading: the bias makes it agree with the filter's height now.
+            self.baro_bias = Some(height_m - z);
+            self.p[(BARO, BARO)] = self.p[(2, 2)] + self.cfg.baro_std_m * self.cfg.baro_std_m;
+            for k in 0..N {
+                if k != BARO {
+                    self.p[(BARO, k)] = -self.p[(2, k)];
+                    self.p[(k, BARO)] = -self.p[(k, 2)];
+                }
+            }
+            return;
+        };
+        let mut h = Vn::zeros();
+        h[2] = 1.0;
+        h[BARO] = 1.0;
+        let r = self.cfg.baro_std_m * self.cfg.baro_std_m;
+        let y = height_m - (z + bias);
+        let s = h.dot(&(self.p * h)) + r;
+        if y * y / s > GATE_1DOF {
+            self.counters.baro_rejected += 1;
+            return;
+        }
+        self.scalar_update(&h, y, r);
+        self.counters.baro_updates += 1;
     }
 
     fn propagate_cov(&mut self, before: &NavState, s: &ImuSample, dt: f64) {
         let r = before.q.to_rotation_matrix().into_inner();
         let f = Vector3::from(s.accel) - self.nav.accel_bias;
         let w = Vector3::from(s.gyro) - self.nav.gyro_bias;
-        let mut fm = M15::identity();
+        let mut fm = Mn::identity();
         let i3 = Matrix3::identity();
         fm.fixed_view_mut::<3, 3>(0, 3).copy_from(&(i3 * dt));
         fm.fixed_view_mut::<3, 3>(3, 6)
@@ -331,7 +423,7 @@ impl Rio {
         fm.fixed_view_mut::<3, 3>(6, 6)
             .copy_from(&(i3 - w.cross_matrix() * dt));
         fm.fixed_view_mut::<3, 3>(6, 12).copy_from(&(-i3 * dt));
-        let mut q = M15::zeros();
+        let mut q = Mn::zeros();
         let c = &self.cfg;
         for (at, density) in [
             (3, c.accel_noise),
@@ -342,6 +434,9 @@ impl Rio {
             for k in at..at + 3 {
                 q[(k, k)] = density * density * dt;
             }
+        }
+        if self.baro_bias.is_some() {
+            q[(BARO, BARO)] = c.baro_bias_walk * c.baro_bias_walk * dt;
         }
         self.p = fm * self.p * fm.transpose() + q;
         self.p = (self.p + self.p.transpose()) * 0.5;
@@ -384,7 +479,7 @@ impl Rio {
     }
 
     /// Predicted radar velocity and its Jacobian with respect to the error state.
-    fn radar_model(&self) -> (Vector3<f64>, M3x15) {
+    fn radar_model(&self) -> (Vector3<f64>, M3xN) {
         let st = self.nav.state();
         let r_wb = st.q.to_rotation_matrix().into_inner();
         let r_br = self.mount.rotation.to_rotation_matrix().into_inner();
@@ -392,7 +487,7 @@ impl Rio {
         let w = self.last_gyro - self.nav.gyro_bias;
         let v_b = r_wb.transpose() * st.v;
         let pred = r_br.transpose() * (v_b + w.cross(&t_br));
-        let mut h = M3x15::zeros();
+        let mut h = M3xN::zeros();
         h.fixed_view_mut::<3, 3>(0, 3)
             .copy_from(&(r_br.transpose() * r_wb.transpose()));
         h.fixed_view_mut::<3, 3>(0, 6)
@@ -438,7 +533,7 @@ impl Rio {
             let sv = self.cfg.init_velocity_std * self.cfg.init_velocity_std;
             let st = self.cfg.init_tilt_std * self.cfg.init_tilt_std;
             for k in 3..8 {
-                for r in 0..15 {
+                for r in 0..N {
                     self.p[(r, k)] = 0.0;
                     self.p[(k, r)] = 0.0;
                 }
@@ -451,12 +546,13 @@ impl Rio {
         self.gated_run = 0;
         self.correct(&y, &h, &rm, &si, !self.cfg.radar_heading);
         self.counters.updates += 1;
+        self.nis_sum += d2;
     }
 
     /// Zero-velocity pseudo-measurement: the body is at rest, its world velocity zero with
     /// standard deviation `std` \[m/s\] per axis (see [`crate::rest`]).
     pub fn zero_velocity(&mut self, std: f64) {
-        let mut h = M3x15::zeros();
+        let mut h = M3xN::zeros();
         h.fixed_view_mut::<3, 3>(0, 3)
             .copy_from(&Matrix3::identity());
         let y = -self.nav.state().v;
@@ -475,7 +571,7 @@ impl Rio {
     /// Position-hold pseudo-measurement: at rest the position is `anchor` \[m\] (where the rest
     /// began) with standard deviation `std` \[m\] per axis.
     pub fn hold_position(&mut self, anchor: Vector3<f64>, std: f64) {
-        let mut h = M3x15::zeros();
+        let mut h = M3xN::zeros();
         h.fixed_view_mut::<3, 3>(0, 0)
             .copy_from(&Matrix3::identity());
         let y = anchor - self.nav.state().p;
@@ -486,7 +582,7 @@ impl Rio {
     /// rate `mean_gyro` \[rad/s\] over `span_s` \[s\] is the gyroscope bias plus white noise of
     /// variance `gyro_noise^2 / span_s` (floored at `std_min` \[rad/s\]).
     pub fn zero_rate(&mut self, mean_gyro: Vector3<f64>, span_s: f64, std_min: f64) {
-        let mut h = M3x15::zeros();
+        let mut h = M3xN::zeros();
         h.fixed_view_mut::<3, 3>(0, 12)
             .copy_from(&Matrix3::identity());
         let y = mean_gyro - self.nav.gyro_bias;
@@ -494,7 +590,7 @@ impl Rio {
         self.pseudo(&y, &h, white.max(std_min));
     }
 
-    fn pseudo(&mut self, y: &Vector3<f64>, h: &M3x15, std: f64) {
+    fn pseudo(&mut self, y: &Vector3<f64>, h: &M3xN, std: f64) {
         let rm = Matrix3::identity() * (std * std);
         let s = h * self.p * h.transpose() + rm;
         if let Some(si) = s.try_inverse() {
@@ -510,7 +606,7 @@ impl Rio {
     fn correct(
         &mut self,
         y: &Vector3<f64>,
-        h: &M3x15,
+        h: &M3xN,
         rm: &Matrix3<f64>,
         si: &Matrix3<f64>,
         keep_heading: bool,
@@ -526,21 +622,24 @@ impl Rio {
                 k.fixed_rows_mut::<3>(at).copy_from(&rows);
             }
         }
-        let dx: V15 = k * y;
-        let ikh = M15::identity() - k * h;
+        let dx: Vn = k * y;
+        let ikh = Mn::identity() - k * h;
         self.p = ikh * self.p * ikh.transpose() + k * rm * k.transpose();
         self.p = (self.p + self.p.transpose()) * 0.5;
         self.inject(&dx);
     }
 
     /// Folds an error-state correction into the nominal state.
-    fn inject(&mut self, dx: &V15) {
+    fn inject(&mut self, dx: &Vn) {
         let mut ns = *self.nav.state();
         ns.p += dx.fixed_rows::<3>(0);
         ns.v += dx.fixed_rows::<3>(3);
         ns.q *= UnitQuaternion::from_scaled_axis(dx.fixed_rows::<3>(6).into_owned());
         self.nav.accel_bias += dx.fixed_rows::<3>(9);
         self.nav.gyro_bias += dx.fixed_rows::<3>(12);
+        if let Some(b) = self.baro_bias.as_mut() {
+            *b += dx[BARO];
+        }
         self.nav.set_state(ns);
     }
 }

@@ -185,6 +185,10 @@ pub struct RunnerCounters {
     /// Rests the filter refuted: its velocity was not consistent with zero
     /// ([`crate::rest::RestDetector::refute`]).
     pub rest_refuted: u64,
+    /// Barometer readings seen.
+    pub pressure_readings: u64,
+    /// Of them, those before the filter started or during an IMU gap (not used).
+    pub pressure_unused: u64,
 }
 
 /// Radar frame seen while levelling, measured and applied once the filter starts.
@@ -414,6 +418,17 @@ impl Runner {
             self.emit(f.id, f.t);
         } else {
             self.waiting.push_back((f.id, f.t));
+        }
+    }
+
+    /// One barometer reading: pressure `pa` \[Pa\] at `t` \[s\] on the IMU clock (the barometer
+    /// sits at the IMU). Aids the height once the filter runs ([`Rio::push_height`]); readings
+    /// while levelling only count.
+    pub fn push_pressure(&mut self, t: f64, pa: f64) {
+        self.counters.pressure_readings += 1;
+        match self.rio.as_mut() {
+            Some(rio) if self.dr.is_none() => rio.push_height(t, crate::rio::pressure_altitude(pa)),
+            _ => self.counters.pressure_unused += 1,
         }
     }
 

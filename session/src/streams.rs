@@ -59,6 +59,8 @@ pub struct StreamReport {
     pub bytes_skipped: u64,
     /// Messages without the fields a sample needs (config acks, GNSS-only messages, ...).
     pub not_samples: u64,
+    /// Barometer readings in the IMU stream ([`PressureSample`]).
+    pub pressure: u64,
     /// Radar frames the framer released but the plausibility checker rejected, indexed by
     /// [`radar_driver::plausible::Implausible::kind_index`] (names: [`IMPLAUSIBLE_NAMES`]).
     pub implausible: [u64; IMPLAUSIBLE_KINDS],
@@ -133,6 +135,7 @@ pub fn radar_frames(session: &Session) -> Result<(Vec<RadarFrame>, StreamReport)
             bad: c.frames_bad_total(),
             bytes_skipped: c.bytes_skipped,
             not_samples: 0,
+            pressure: 0,
             implausible: p.rejected,
             reanchored: p.reanchored,
             retracted: p.retracted,
@@ -141,11 +144,32 @@ pub fn radar_frames(session: &Session) -> Result<(Vec<RadarFrame>, StreamReport)
     ))
 }
 
+/// A decoded barometer reading (an MTData2 message with BaroPressure and SampleTimeFine in the
+/// IMU stream).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PressureSample {
+    /// Host time of the chunk that completed the message \[s since session start\], if indexed.
+    pub host_s: Option<f64>,
+    /// Unwrapped SampleTimeFine \[s\] (the IMU's clock).
+    pub sensor_s: f64,
+    /// Pressure \[Pa\].
+    pub pa: f64,
+}
+
 /// Decodes the IMU stream into samples (messages carrying acceleration, rate of turn and
 /// SampleTimeFine) with the streaming [`ImuDecoder`] the runtime's live reader runs.
 pub fn imu_samples(session: &Session) -> Result<(Vec<ImuSample>, StreamReport), SessionError> {
+    imu_and_pressure(session).map(|(s, _, r)| (s, r))
+}
+
+/// [`imu_samples`] and the barometer readings of the same stream (empty without a barometer),
+/// from one decoding pass.
+#[allow(clippy::type_complexity)]
+pub fn imu_and_pressure(
+    session: &Session,
+) -> Result<(Vec<ImuSample>, Vec<PressureSample>, StreamReport), SessionError> {
     let Some(stream) = &session.imu else {
-        return Ok((Vec::new(), StreamReport::default()));
+        return Ok((Vec::new(), Vec::new(), StreamReport::default()));
     };
     let wrap = session
         .meta
@@ -155,9 +179,10 @@ pub fn imu_samples(session: &Session) -> Result<(Vec<ImuSample>, StreamReport), 
     let bytes = stream.read_all()?;
     let mut dec = ImuDecoder::new(wrap);
     let mut out = Vec::new();
+    let mut baro = Vec::new();
     for chunk in stream.chunks() {
         let host_s = chunk.host_ns.map(|n| n as f64 * 1e-9);
-        dec.feed(
+        dec.feed_with_pressure(
             &bytes[chunk.start as usize..chunk.end as usize],
             host_s,
             |s| {
@@ -170,18 +195,27 @@ pub fn imu_samples(session: &Session) -> Result<(Vec<ImuSample>, StreamReport), 
                     bytes: s.bytes,
                 })
             },
+            |p| {
+                baro.push(PressureSample {
+                    host_s: p.stamp,
+                    sensor_s: p.sensor_s,
+                    pa: p.pa,
+                })
+            },
         );
     }
     dec.finish();
     let r = dec.report();
     Ok((
         out,
+        baro,
         StreamReport {
             bytes: r.framer.bytes_in,
             ok: r.framer.frames_ok,
             bad: r.framer.frames_bad_total(),
             bytes_skipped: r.framer.bytes_skipped,
             not_samples: r.not_samples,
+            pressure: r.pressure,
             ..StreamReport::default()
         },
     ))

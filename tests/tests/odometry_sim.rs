@@ -285,3 +285,45 @@ fn leakage_and_coarse_doppler_do_not_let_the_vertical_velocity_run_away() {
     assert!(r.near_field_points > 0, "leakage is seen");
     assert!(dz < gz + 2.0, "height ran away: {dz:.2} m");
 }
+
+#[test]
+fn a_barometer_carries_the_height_through_a_climb_the_radar_cannot_see() {
+    // A 5 m climb with a consumer MEMS IMU: the radar's narrow elevation field barely sees
+    // vertical motion, the barometer (MTData2 BaroPressure in the IMU stream) does.
+    let mut sc = Scenario::new(Family::Atrium, MotionKind::Handheld, 5);
+    sc.duration_s = 60.0;
+    sc.height_change_m = 5.0;
+    sc.baro_hz = 50.0;
+    sc.imu_spec = milliego_sim::imu::ImuGrade::Mems.spec();
+    let (_dir, s) = simulated(&sc);
+    let gt = s.groundtruth().unwrap().expect("ground truth");
+    let z_error = |r: &milliego_odometry::offline::OfflineResult| {
+        let (e0, g0) = (r.trajectory[0].p[2], gt[0].p[2]);
+        r.trajectory
+            .iter()
+            .map(|p| {
+                let i = gt.partition_point(|g| g.t < p.t).min(gt.len() - 1);
+                ((p.p[2] - e0) - (gt[i].p[2] - g0)).abs()
+            })
+            .fold(0.0, f64::max)
+    };
+    let with = run(&s, &OfflineConfig::default()).expect("offline run");
+    let without = run(
+        &s,
+        &OfflineConfig {
+            use_barometer: false,
+            ..OfflineConfig::default()
+        },
+    )
+    .expect("offline run");
+    let (e_with, e_without) = (z_error(&with), z_error(&without));
+    println!(
+        "5 m climb: worst height error {e_with:.2} m with the barometer ({} of {} readings applied), {e_without:.2} m without",
+        with.baro_updates, with.pressure_readings
+    );
+    assert_eq!(without.baro_updates, 0, "--no-barometer means none");
+    assert!(with.pressure_readings > 2500, "50 Hz for 60 s");
+    assert!(with.baro_updates * 10 > with.pressure_readings as u64 * 9);
+    assert!(e_with < 0.5, "height error {e_with:.2} m with a barometer");
+    assert!(e_without > 2.0 * e_with);
+}

@@ -3,9 +3,11 @@
 //! stream, the runtime's reader live over a port; the same bytes give the same samples however
 //! they are chunked.
 //!
-//! A sample is an MTData2 message with acceleration, rate of turn and SampleTimeFine. Nothing is
-//! dropped silently: [`ImuDecodeReport`] counts rejected frames (framer) and messages that are
-//! not samples (acknowledgements, GNSS-only or orientation-only messages).
+//! A sample is an MTData2 message with acceleration, rate of turn and SampleTimeFine; a message
+//! with BaroPressure and SampleTimeFine alone is a barometer reading
+//! ([`Decoder::feed_with_pressure`]). Nothing is dropped silently: [`ImuDecodeReport`] counts
+//! rejected frames (framer), barometer readings and messages that are neither
+//! (acknowledgements, GNSS-only or orientation-only messages).
 //!
 //! ```
 //! use imu_driver::host::decoder::Decoder;
@@ -55,6 +57,18 @@ pub struct ImuSample<S> {
     pub bytes: usize,
 }
 
+/// One barometer reading (an MTData2 message with BaroPressure and SampleTimeFine, as MTi-100
+/// class devices send it beside the inertial messages).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PressureSample<S> {
+    /// The caller's stamp of the chunk that held the message's last byte.
+    pub stamp: S,
+    /// Unwrapped SampleTimeFine \[s\].
+    pub sensor_s: f64,
+    /// Pressure \[Pa\].
+    pub pa: f64,
+}
+
 /// What decoding found so far.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct ImuDecodeReport {
@@ -62,8 +76,12 @@ pub struct ImuDecodeReport {
     pub framer: Counters,
     /// Samples published.
     pub samples: u64,
-    /// Good frames that were not samples (other messages, MTData2 without acceleration, rate of
-    /// turn and SampleTimeFine).
+    /// Barometer readings (messages with BaroPressure and SampleTimeFine but no inertial sample),
+    /// published to [`Decoder::feed_with_pressure`]'s callback or, with [`Decoder::feed`], only
+    /// counted here.
+    pub pressure: u64,
+    /// Good frames that were neither samples nor barometer readings (other messages, MTData2
+    /// without acceleration, rate of turn and SampleTimeFine).
     pub not_samples: u64,
 }
 
@@ -72,6 +90,7 @@ pub struct Decoder {
     framer: Box<LogFramer>,
     checker: Checker,
     samples: u64,
+    pressure: u64,
     not_samples: u64,
 }
 
@@ -91,6 +110,7 @@ impl Decoder {
             framer: Box::new(LogFramer::new()),
             checker: Checker::new(wrap),
             samples: 0,
+            pressure: 0,
             not_samples: 0,
         }
     }
@@ -100,16 +120,24 @@ impl Decoder {
         ImuDecodeReport {
             framer: *self.framer.counters(),
             samples: self.samples,
+            pressure: self.pressure,
             not_samples: self.not_samples,
         }
     }
 
-    /// Feeds the next chunk of the stream, received at `stamp`; `publish` gets each sample.
-    pub fn feed<S: Copy>(
+    /// Feeds the next chunk of the stream, received at `stamp`; `publish` gets each sample
+    /// (barometer readings are counted in [`ImuDecodeReport::pressure`]).
+    pub fn feed<S: Copy>(&mut self, input: &[u8], stamp: S, publish: impl FnMut(ImuSample<S>)) {
+        self.feed_with_pressure(input, stamp, publish, |_| {});
+    }
+
+    /// [`Decoder::feed`], with `pressure` getting each barometer reading.
+    pub fn feed_with_pressure<S: Copy>(
         &mut self,
         mut input: &[u8],
         stamp: S,
         mut publish: impl FnMut(ImuSample<S>),
+        mut pressure: impl FnMut(PressureSample<S>),
     ) {
         loop {
             match self.framer.poll(&mut input) {
@@ -131,6 +159,14 @@ impl Decoder {
                                 packet_counter: s.packet_counter,
                                 flags: checked.flags,
                                 bytes: f.as_bytes().len(),
+                            });
+                        }
+                        (None, None, Some(ticks)) if s.pressure_pa.is_some() => {
+                            self.pressure += 1;
+                            pressure(PressureSample {
+                                stamp,
+                                sensor_s: ticks as f64 * 1e-4,
+                                pa: s.pressure_pa.unwrap_or(f64::NAN),
                             });
                         }
                         _ => self.not_samples += 1,
@@ -169,6 +205,45 @@ mod tests {
         }
         let n = w.finish(0xFF).unwrap();
         buf[..n].to_vec()
+    }
+
+    fn pressure(ticks: u32, counter: u16, pa: u32) -> Vec<u8> {
+        let mut buf = [0u8; 64];
+        let mut w = MtData2Writer::new(&mut buf);
+        w.value(DataId(0x1020), &Value::PacketCounter(counter))
+            .unwrap();
+        w.value(DataId(0x1060), &Value::SampleTimeFine(ticks))
+            .unwrap();
+        w.value(DataId(0x3010), &Value::BaroPressure(pa)).unwrap();
+        let n = w.finish(0xFF).unwrap();
+        buf[..n].to_vec()
+    }
+
+    #[test]
+    fn barometer_readings_come_out_beside_the_samples_and_are_counted() {
+        let mut bytes = message(100, 1, true);
+        bytes.extend(pressure(150, 2, 101_300));
+        bytes.extend(message(200, 3, true));
+        bytes.extend(message(250, 4, false)); // neither: time alone
+        let mut dec = Decoder::new(TimeWrap::Pow32);
+        let (mut samples, mut baro) = (Vec::new(), Vec::new());
+        for chunk in bytes.chunks(7) {
+            dec.feed_with_pressure(
+                chunk,
+                (),
+                |s| samples.push(s.sensor_s),
+                |p| baro.push((p.sensor_s, p.pa)),
+            );
+        }
+        assert_eq!(samples, [0.01, 0.02]);
+        assert_eq!(baro, [(150.0 * 1e-4, 101_300.0)]);
+        let r = dec.report();
+        assert_eq!((r.samples, r.pressure, r.not_samples), (2, 1, 1));
+        // `feed` leaves them out, counted.
+        let mut dec = Decoder::new(TimeWrap::Pow32);
+        let mut n = 0;
+        dec.feed(&bytes, (), |_| n += 1);
+        assert_eq!((n, dec.report().pressure), (2, 1));
     }
 
     #[test]

@@ -7,7 +7,7 @@ pub mod device;
 #[cfg(feature = "std")]
 pub mod reader;
 
-pub use decoder::{Decoder, ImuDecodeReport, ImuSample};
+pub use decoder::{Decoder, ImuDecodeReport, ImuSample, PressureSample};
 #[cfg(feature = "serial")]
 pub use device::{
     compare_rates, ConfigReport, ControlStep, Device, DeviceError, HostBaud, OutputReport, Plan,
