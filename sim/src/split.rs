@@ -209,6 +209,13 @@ impl Entry {
             _ => root.join(self.dir_name()),
         }
     }
+    /// Whether a session whose `session.toml` description is `description` holds this entry's
+    /// scenario (the simulator's crate version in the description aside): a work directory
+    /// made by another version of the split, or of its draws, is not silently reused.
+    pub fn is_session(&self, description: &str) -> bool {
+        let body = |d: &str| d.split_once(": ").map(|(_, b)| b.to_string());
+        body(description).is_some_and(|b| Some(b) == body(&self.scenario().description()))
+    }
 }
 
 /// Families a model may train on.
