@@ -6,7 +6,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use milliego_preprocess::dataset::{build, Progress};
 use milliego_preprocess::Config;
 use milliego_sim::scenario::run as simulate;
-use milliego_sim::split::{benchmark, Set};
+use milliego_sim::split::{Set, SplitVersion};
 use std::path::PathBuf;
 
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
@@ -28,6 +28,9 @@ pub struct BuildArgs {
     /// --work when missing).
     #[arg(long)]
     set: Option<String>,
+    /// Benchmark split version of --set: v1 or v2 (docs/simulator.md).
+    #[arg(long, default_value = "v1")]
+    split: String,
     /// Where benchmark sessions live or are simulated.
     #[arg(long)]
     work: Option<PathBuf>,
@@ -61,17 +64,22 @@ pub fn run(cmd: DatasetCmd) -> Result<()> {
     let mut sessions = a.sessions.clone();
     if let Some(set) = &a.set {
         let set: Set = set.parse()?;
+        let version: SplitVersion = a.split.parse()?;
         let work = a
             .work
             .clone()
             .unwrap_or_else(|| std::env::temp_dir().join("milliego-benchmark"));
-        let entries: Vec<_> = benchmark().into_iter().filter(|e| e.set == set).collect();
+        let entries = version.entries(set);
         let sim = bar(entries.len() as u64, a.quiet, "simulating");
         for e in &entries {
-            let dir = work.join(set.name()).join(e.dir_name());
+            let dir = e.work_dir(&work);
             if !dir.join("session.toml").is_file() {
                 sim.set_message(e.dir_name());
                 simulate(&e.scenario(), &dir, &mut |_| {})?;
+            }
+            let found = milliego_session::Session::open(&dir)?.meta.description;
+            if !e.is_session(&found) {
+                return Err(crate::score::stale(&dir, &found, e).into());
             }
             sim.inc(1);
             sessions.push(dir);

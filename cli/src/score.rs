@@ -10,7 +10,7 @@ use milliego_models::Model;
 use milliego_odometry::offline::{run as run_offline, Estimator, OfflineConfig};
 use milliego_session::Session;
 use milliego_sim::scenario::run as simulate;
-use milliego_sim::split::{benchmark, Set};
+use milliego_sim::split::{Set, SplitVersion};
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -24,6 +24,10 @@ pub struct ScoreArgs {
     /// Benchmark set: train, val or test (held out: unseen family and seeds).
     #[arg(long, default_value = "test")]
     set: String,
+    /// Benchmark split version: v1 (benign rigs, indoor) or v2 (outdoor too, each session's rig
+    /// drawn from its seed: rests, IMU grades/rates/gaps, radar mounts, ...; docs/simulator.md).
+    #[arg(long, default_value = "v1")]
+    split: String,
     /// Where the simulated sessions go (reused when already there).
     #[arg(long)]
     work: Option<PathBuf>,
@@ -59,14 +63,24 @@ fn default_models() -> Vec<PathBuf> {
     .collect()
 }
 
+/// The error for a work directory that holds another scenario than the split's entry.
+pub(crate) fn stale(dir: &std::path::Path, found: &str, e: &milliego_sim::split::Entry) -> String {
+    format!(
+        "{} holds another scenario ({found:?}, expected {:?}); remove it or give another --work",
+        dir.display(),
+        e.scenario().description()
+    )
+}
+
 pub fn run(a: ScoreArgs) -> Result<()> {
     let set: Set = a.set.parse()?;
+    let version: SplitVersion = a.split.parse()?;
     let work = a
         .work
         .unwrap_or_else(|| std::env::temp_dir().join("milliego-benchmark"));
-    let entries: Vec<_> = benchmark()
+    let entries: Vec<_> = version
+        .entries(set)
         .into_iter()
-        .filter(|e| e.set == set)
         .take(a.limit.unwrap_or(usize::MAX))
         .collect();
     let mut estimators: Vec<(String, Column)> = vec![
@@ -106,13 +120,16 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         .expect("valid template"),
     );
     for e in &entries {
-        let dir = work.join(set.name()).join(e.dir_name());
+        let dir = e.work_dir(&work);
         bar.set_message(e.dir_name());
         if !dir.join("session.toml").is_file() {
             bar.println(format!("simulating {}", dir.display()));
             simulate(&e.scenario(), &dir, &mut |_| {})?;
         }
         let s = Session::open(&dir)?;
+        if !e.is_session(&s.meta.description) {
+            return Err(stale(&dir, &s.meta.description, e).into());
+        }
         let gt = Trajectory::from_tum(&s.groundtruth()?.ok_or("no ground truth")?);
         for ((_, est), (_, out)) in estimators.iter_mut().zip(per.iter_mut()) {
             let trajectory = match est {
@@ -151,11 +168,19 @@ pub fn run(a: ScoreArgs) -> Result<()> {
                     "ate_2d_mean_m": a2.mean, "ate_2d_std_m": a2.std, "ate_2d_max_m": a2.max, "drift_pct_mean": d.mean, "sessions": v.len()}))
             })
             .collect();
-        println!("{}", json!({"set": set.name(), "estimators": rows}));
+        println!(
+            "{}",
+            json!({"set": set.name(), "split": version.name(), "estimators": rows})
+        );
         return Ok(());
     }
+    // Version 1 keeps the header it always had.
+    let of_split = match version {
+        SplitVersion::V1 => String::new(),
+        v => format!(" of split {v}"),
+    };
     println!(
-        "{} sessions of the '{}' set (per-session ATE means, then over sessions)",
+        "{} sessions of the '{}' set{of_split} (per-session ATE means, then over sessions)",
         entries.len(),
         set.name()
     );

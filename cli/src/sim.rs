@@ -3,8 +3,8 @@
 //!
 //! ```text
 //! milliego sim --family office --motion handheld --seed 7 --duration 30 -o DIR
-//! milliego sim split
-//! milliego sim benchmark --set test -o DIR
+//! milliego sim split [--split v1|v2]
+//! milliego sim benchmark --set test [--split v1|v2] -o DIR
 //! ```
 
 use crate::output;
@@ -12,7 +12,7 @@ use clap::{Args, Subcommand};
 use milliego_sim::imu::ImuGrade;
 use milliego_sim::motion::MotionKind;
 use milliego_sim::scenario::{self, Scenario, Summary};
-use milliego_sim::split::{self, Set};
+use milliego_sim::split::{self, Set, SplitVersion};
 use milliego_sim::world::Family;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -32,9 +32,11 @@ pub struct SimArgs {
 
 #[derive(Debug, Subcommand)]
 enum SimCmd {
-    /// Print the benchmark split: which (family, motion, seed) train, validate and test.
-    Split,
-    /// Write every session of one set of the benchmark under DIR/SET/FAMILY-MOTION-SEED.
+    /// Print the benchmark split: which (family, motion, seed) train, validate and test (v2: with
+    /// each session's drawn settings).
+    Split(SplitArgs),
+    /// Write every session of one set of the benchmark under DIR/SET/FAMILY-MOTION-SEED (v2:
+    /// DIR/v2/SET/FAMILY-MOTION-SEED).
     Benchmark(BenchArgs),
 }
 
@@ -103,10 +105,20 @@ struct RunArgs {
 }
 
 #[derive(Debug, Args)]
+struct SplitArgs {
+    /// Split version: v1 (benign rigs, indoor) or v2 (outdoor too, rigs drawn per session).
+    #[arg(long, default_value = "v1", value_parser = parse::<SplitVersion>)]
+    split: SplitVersion,
+}
+
+#[derive(Debug, Args)]
 struct BenchArgs {
     /// Which set: train, val or test.
     #[arg(long, value_parser = parse::<Set>)]
     set: Set,
+    /// Split version: v1 or v2.
+    #[arg(long, default_value = "v1", value_parser = parse::<SplitVersion>)]
+    split: SplitVersion,
     /// Root directory of the benchmark.
     #[arg(short = 'o', long = "out")]
     out: PathBuf,
@@ -128,7 +140,7 @@ fn parse_xyz(s: &str) -> std::result::Result<[f64; 3], String> {
 /// Runs `milliego sim`.
 pub fn run(args: SimArgs) -> Result<()> {
     match args.cmd {
-        Some(SimCmd::Split) => print_split(),
+        Some(SimCmd::Split(a)) => print_split(a.split),
         Some(SimCmd::Benchmark(b)) => benchmark(&b),
         None => {
             let r = args.run;
@@ -189,25 +201,49 @@ fn summary_line(out: &Path, s: &Summary) -> String {
     )
 }
 
-fn print_split() -> Result<()> {
+fn print_split(version: SplitVersion) -> Result<()> {
     let mut out = output::stdout();
-    let mut lines = vec![
-        "# milliEgo simulator benchmark split (docs/simulator.md)".to_string(),
-        format!(
-            "# held-out family: {}; train seeds {:?}, val seeds {:?}, test seeds {:?}; {} s each",
-            split::HELD_OUT_FAMILY,
-            split::TRAIN_SEEDS,
-            split::VAL_SEEDS,
-            split::TEST_SEEDS,
-            split::DURATION_S
-        ),
-        "set,family,motion,seed,duration_s".to_string(),
-    ];
-    lines.extend(split::benchmark().iter().map(|e| {
-        format!(
+    let mut lines = match version {
+        // Version 1: the listing it always had.
+        SplitVersion::V1 => vec![
+            "# milliEgo simulator benchmark split (docs/simulator.md)".to_string(),
+            format!(
+                "# held-out family: {}; train seeds {:?}, val seeds {:?}, test seeds {:?}; {} s each",
+                split::HELD_OUT_FAMILY,
+                split::TRAIN_SEEDS,
+                split::VAL_SEEDS,
+                split::TEST_SEEDS,
+                split::DURATION_S
+            ),
+            "set,family,motion,seed,duration_s".to_string(),
+        ],
+        v => vec![
+            format!("# milliEgo simulator benchmark split {v} (docs/simulator.md, \"Benchmark split versions\")"),
+            format!(
+                "# held-out family: {}; train seeds {:?}, val seeds {:?}, test seeds {:?}; {} s each; \
+                 settings: the scenario's description",
+                split::HELD_OUT_FAMILY,
+                v.seeds(Set::Train),
+                v.seeds(Set::Val),
+                v.seeds(Set::Test),
+                split::DURATION_S
+            ),
+            "set,family,motion,seed,duration_s,dir,settings".to_string(),
+        ],
+    };
+    lines.extend(version.benchmark().iter().map(|e| {
+        let row = format!(
             "{},{},{},{},{}",
             e.set, e.family, e.motion, e.seed, e.duration_s
-        )
+        );
+        match version {
+            SplitVersion::V1 => row,
+            _ => format!(
+                "{row},{},\"{}\"",
+                e.dir_name(),
+                e.scenario().description().replace('"', "\"\"")
+            ),
+        }
     }));
     for l in &lines {
         if !output::line(&mut out, l)? {
@@ -221,7 +257,7 @@ fn print_split() -> Result<()> {
 }
 
 fn benchmark(b: &BenchArgs) -> Result<()> {
-    let entries = split::entries(b.set);
+    let entries = b.split.entries(b.set);
     let n = entries.len();
     for (i, e) in entries.iter().enumerate() {
         let out = b.out.join(e.dir_name());
@@ -250,6 +286,21 @@ mod tests {
         assert!(parse(&["--family", "garage", "-o", "x"]).is_err());
         assert!(parse(&["--motion", "flying", "-o", "x"]).is_err());
         assert!(parse(&["benchmark", "--set", "dev", "-o", "x"]).is_err());
+        assert!(parse(&["benchmark", "--set", "val", "--split", "v3", "-o", "x"]).is_err());
+        assert!(parse(&["split", "--split", "2"]).is_err());
+        match parse(&["benchmark", "--set", "val", "--split", "v2", "-o", "x"])
+            .unwrap()
+            .cmd
+        {
+            Some(SimCmd::Benchmark(b)) => {
+                assert_eq!((b.set, b.split), (Set::Val, SplitVersion::V2))
+            }
+            other => panic!("{other:?}"),
+        }
+        match parse(&["split"]).unwrap().cmd {
+            Some(SimCmd::Split(a)) => assert_eq!(a.split, SplitVersion::V1),
+            other => panic!("{other:?}"),
+        }
         assert!(parse(&["--radar-lever", "1,2", "-o", "x"]).is_err());
         assert!(parse(&["--imu-grade", "tactical", "-o", "x"]).is_err());
         let a = parse(&["--imu-grade", "mems", "-o", "x"]).unwrap();
