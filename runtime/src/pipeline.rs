@@ -304,8 +304,9 @@ fn spawn_named<T: Send + 'static>(
 struct InputCounters {
     radar: Arc<ReaderStats>,
     imu: Arc<ReaderStats>,
-    /// Radar frames and IMU samples decoded.
-    decoded: Arc<[AtomicU64; 2]>,
+    /// Radar frames, IMU samples, barometer readings decoded, and barometer readings dropped
+    /// (a later one came before an IMU sample could carry it).
+    decoded: Arc<[AtomicU64; 4]>,
 }
 
 /// Runs the pipeline until the input ends, `stop` is set, or a limit is reached.
@@ -428,7 +429,7 @@ fn start_session(
         error,
     };
     let (frames, radar_rep) = milliego_session::streams::radar_frames(s).map_err(session_err)?;
-    let (imu, _) = milliego_session::streams::imu_samples(s).map_err(session_err)?;
+    let (imu, baro, _) = milliego_session::streams::imu_and_pressure(s).map_err(session_err)?;
     if imu.is_empty() && frames.is_empty() {
         return Err(RunError::EmptySession { dir: s.dir.clone() });
     }
@@ -437,7 +438,12 @@ fn start_session(
     let sh2 = Arc::clone(sh);
     let dec = Arc::clone(&counters.decoded);
     let t = spawn_named("feeder", move || {
-        feed_session(&sh2, &frames, &imu, &clock, realtime, online_clock, &dec);
+        let streams = SessionStreams {
+            frames: &frames,
+            imu: &imu,
+            baro: &baro,
+        };
+        feed_session(&sh2, &streams, &clock, realtime, online_clock, &dec);
     })?;
     Ok((t, radar_rep))
 }
@@ -570,6 +576,8 @@ fn spawn_imu_reader(
                 sh2.imu_q.push(it);
             });
             dec[1].store(decoder.samples(), Ordering::Relaxed);
+            dec[2].store(decoder.pressure(), Ordering::Relaxed);
+            dec[3].store(decoder.pressure_dropped(), Ordering::Relaxed);
         });
     })
 }
@@ -831,6 +839,17 @@ fn run_summary(e: &RunEnds<'_>, sh: &Shared, c: &InputCounters, latency: &Latenc
         frames_in: FramesIn {
             radar: radar_in,
             imu: load(&c.decoded[1]),
+            pressure: load(&c.decoded[2]),
+        },
+        barometer: if load(&c.decoded[2]) == 0 {
+            "none: height from the radar and the IMU only".into()
+        } else if e.estimator.name() == "doppler" {
+            format!("{} readings aid the height", load(&c.decoded[2]))
+        } else {
+            format!(
+                "{} readings, not used by this estimator",
+                load(&c.decoded[2])
+            )
         },
         frames_out: FramesOut {
             poses_sent: u64::from(e.out.sent),
@@ -848,7 +867,8 @@ fn run_summary(e: &RunEnds<'_>, sh: &Shared, c: &InputCounters, latency: &Latenc
             sync_buffers: sc.dropped,
             event_queue: sh.ev_q.dropped(),
             pose_queue: sh.pose_q.dropped(),
-            total: sh.dropped(),
+            pressure: load(&c.decoded[3]),
+            total: sh.dropped() + load(&c.decoded[3]),
         },
         sync: SyncSummary {
             radar_released: sc.radar,
@@ -883,15 +903,22 @@ fn run_summary(e: &RunEnds<'_>, sh: &Shared, c: &InputCounters, latency: &Latenc
 
 /// Feeds a session's decoded streams in the offline runner's order (each radar frame before the
 /// first IMU sample at or after its time), waiting when a queue is full (nothing is dropped).
+/// A session's decoded streams.
+struct SessionStreams<'a> {
+    frames: &'a [milliego_session::streams::RadarFrame],
+    imu: &'a [milliego_session::streams::ImuSample],
+    baro: &'a [milliego_session::streams::PressureSample],
+}
+
 fn feed_session(
     sh: &Shared,
-    frames: &[milliego_session::streams::RadarFrame],
-    imu: &[milliego_session::streams::ImuSample],
+    streams: &SessionStreams<'_>,
     clock: &milliego_session::streams::SessionClock,
     realtime: bool,
     online_clock: bool,
-    decoded: &[AtomicU64; 2],
+    decoded: &[AtomicU64; 4],
 ) {
+    let SessionStreams { frames, imu, baro } = *streams;
     let mut radar: Vec<(f64, usize)> = frames
         .iter()
         .enumerate()
@@ -926,11 +953,23 @@ fn feed_session(
         sh.watermark.store(tr.to_bits(), Ordering::Release);
     };
     let mut next = 0;
+    let mut next_baro = 0;
     for s in imu {
         if sh.stop.load(Ordering::Relaxed) {
             return;
         }
         let t = clock.imu_s(s.sensor_s);
+        // The barometer readings due at or before this sample: the latest rides with it (as the
+        // live reader does), earlier ones are counted as dropped.
+        let mut pressure = None;
+        while next_baro < baro.len() && clock.imu_s(baro[next_baro].sensor_s) <= t {
+            let b = &baro[next_baro];
+            next_baro += 1;
+            decoded[2].fetch_add(1, Ordering::Relaxed);
+            if pressure.replace((b.sensor_s, b.pa)).is_some() {
+                decoded[3].fetch_add(1, Ordering::Relaxed);
+            }
+        }
         while next < radar.len() && radar[next].0 <= t {
             pace(radar[next].0);
             push_radar(radar[next].0, radar[next].1);
@@ -945,6 +984,7 @@ fn feed_session(
             gyro: s.gyro,
             bytes: s.bytes,
             t: (!online_clock).then_some(t),
+            pressure,
         };
         sh.imu_q.push_wait(it);
         decoded[1].fetch_add(1, Ordering::Relaxed);

@@ -89,6 +89,9 @@ pub struct ImuItem {
     pub bytes: usize,
     /// Time on the common clock \[s\], once known (offline feeders set it).
     pub t: Option<f64>,
+    /// The barometer reading that came since the previous sample, if any: its SampleTimeFine
+    /// \[s\] and pressure \[Pa\] (the estimator takes it just before this sample).
+    pub pressure: Option<(f64, f64)>,
 }
 
 /// The live radar decoder: the drivers' streaming [`Decoder`] (framer, plausibility checker,
@@ -181,6 +184,9 @@ fn fill(it: &mut RadarItem, f: &Decoded<'_, (f64, u64)>) {
 /// decodes sessions offline, producing [`ImuItem`]s.
 pub struct ImuDecoder {
     inner: imu_driver::host::Decoder,
+    /// A barometer reading waiting for the next sample: SampleTimeFine \[s\], pressure \[Pa\].
+    held: Option<(f64, f64)>,
+    pressure_dropped: u64,
 }
 
 impl std::fmt::Debug for ImuDecoder {
@@ -196,6 +202,8 @@ impl ImuDecoder {
     pub fn new(wrap: TimeWrap) -> Self {
         ImuDecoder {
             inner: imu_driver::host::Decoder::new(wrap),
+            held: None,
+            pressure_dropped: 0,
         }
     }
 
@@ -209,19 +217,45 @@ impl ImuDecoder {
         self.inner.report()
     }
 
-    /// Feeds bytes; `emit` gets each sample.
+    /// Feeds bytes; `emit` gets each sample, with the barometer reading that came since the
+    /// previous one attached (a second reading before the next sample replaces the first, which
+    /// is counted in [`ImuDecoder::pressure_dropped`]).
     pub fn feed(&mut self, input: &[u8], host_s: f64, read_ns: u64, mut emit: impl FnMut(ImuItem)) {
-        self.inner.feed(input, (host_s, read_ns), |s| {
-            emit(ImuItem {
-                host_s: s.stamp.0,
-                read_ns: s.stamp.1,
-                sensor_s: s.sensor_s,
-                accel: s.accel,
-                gyro: s.gyro,
-                bytes: s.bytes,
-                t: None,
-            })
-        });
+        let held = core::cell::Cell::new(self.held);
+        let dropped = core::cell::Cell::new(0u64);
+        self.inner.feed_with_pressure(
+            input,
+            (host_s, read_ns),
+            |s| {
+                emit(ImuItem {
+                    host_s: s.stamp.0,
+                    read_ns: s.stamp.1,
+                    sensor_s: s.sensor_s,
+                    accel: s.accel,
+                    gyro: s.gyro,
+                    bytes: s.bytes,
+                    t: None,
+                    pressure: held.take(),
+                })
+            },
+            |p| {
+                if held.replace(Some((p.sensor_s, p.pa))).is_some() {
+                    dropped.set(dropped.get() + 1);
+                }
+            },
+        );
+        self.held = held.get();
+        self.pressure_dropped += dropped.get();
+    }
+
+    /// Barometer readings decoded.
+    pub fn pressure(&self) -> u64 {
+        self.inner.report().pressure
+    }
+
+    /// Barometer readings replaced by a later one before an IMU sample could carry them.
+    pub fn pressure_dropped(&self) -> u64 {
+        self.pressure_dropped
     }
 
     /// Forgets a partial message (after the port was reopened).

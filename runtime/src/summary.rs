@@ -16,6 +16,9 @@ pub struct RunSummary {
     pub wall_s: f64,
     /// Radar frames and IMU samples decoded.
     pub frames_in: FramesIn,
+    /// Whether a barometer aided the height (or that the input had none).
+    #[serde(default)]
+    pub barometer: String,
     /// What the estimator stage and the outputs produced.
     pub frames_out: FramesOut,
     /// Items dropped by every queue and buffer.
@@ -39,6 +42,9 @@ pub struct FramesIn {
     pub radar: u64,
     /// IMU samples.
     pub imu: u64,
+    /// Barometer readings (in the IMU stream).
+    #[serde(default)]
+    pub pressure: u64,
 }
 
 /// Outputs produced.
@@ -75,6 +81,9 @@ pub struct Drops {
     pub event_queue: u64,
     /// Estimator -> output queue.
     pub pose_queue: u64,
+    /// Barometer readings replaced by a later one before an IMU sample could carry them.
+    #[serde(default)]
+    pub pressure: u64,
     /// All of the above.
     pub total: u64,
 }

@@ -60,6 +60,9 @@ impl Estimator for Classical {
     }
 
     fn push_imu(&mut self, s: &ImuInput) {
+        if let Some((t, pa)) = s.pressure {
+            self.runner.push_pressure(t, pa);
+        }
         self.runner.push_imu(ImuSample {
             t: s.t,
             accel: s.accel,

@@ -42,6 +42,9 @@ pub struct ImuInput {
     pub accel: [f64; 3],
     /// Rate of turn \[rad/s\].
     pub gyro: [f64; 3],
+    /// A barometer reading just before this sample: its time on the common clock \[s\] and
+    /// pressure \[Pa\].
+    pub pressure: Option<(f64, f64)>,
 }
 
 /// Motion of the body between two radar frames.

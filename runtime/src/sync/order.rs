@@ -377,6 +377,8 @@ impl Synchroniser {
                         t: s.t.unwrap_or(0.0),
                         accel: s.accel,
                         gyro: s.gyro,
+                        // Prediction only: the reading comes with the ordered sample.
+                        pressure: None,
                     },
                     read_ns: s.read_ns,
                     health,
@@ -427,6 +429,7 @@ impl Synchroniser {
                     t,
                     accel: s.accel,
                     gyro: s.gyro,
+                    pressure: pressure_at(&s, t),
                 },
                 read_ns: s.read_ns,
                 health,
@@ -490,6 +493,7 @@ impl Synchroniser {
                     t,
                     accel: s.accel,
                     gyro: s.gyro,
+                    pressure: pressure_at(&s, t),
                 },
                 read_ns: s.read_ns,
                 health,
@@ -502,4 +506,11 @@ impl Synchroniser {
             }
         }
     }
+}
+
+/// The barometer reading carried by `s` on the common clock: the sample's time `t` \[s\] less
+/// the SampleTimeFine between reading and sample (one device clock).
+fn pressure_at(s: &ImuItem, t: f64) -> Option<(f64, f64)> {
+    s.pressure
+        .map(|(sensor_s, pa)| (t - (s.sensor_s - sensor_s).max(0.0), pa))
 }
