@@ -77,7 +77,9 @@ fn steady_state_allocates_nothing() {
         mounting: Mounting::from_session(&s.meta.extrinsics),
         ..ClassicalConfig::default()
     };
-    classical.ego.sigma = d.velocity_resolution_mps as f32 / 2.0;
+    classical.ego = classical
+        .ego
+        .with_velocity_resolution(d.velocity_resolution_mps);
     let mut sync = Synchroniser::new(SyncConfig {
         radar_period_s: Some(d.frame_period_ms / 1e3),
         half_chirps_s: d.active_frame_time_ms / 2e3,

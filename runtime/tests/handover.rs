@@ -69,7 +69,9 @@ fn sim(seed: u64) -> Sim {
         mounting: Mounting::from_session(&session.meta.extrinsics),
         ..ClassicalConfig::default()
     };
-    classical.ego.sigma = d.velocity_resolution_mps as f32 / 2.0;
+    classical.ego = classical
+        .ego
+        .with_velocity_resolution(d.velocity_resolution_mps);
     Sim {
         _dir: dir,
         session,
