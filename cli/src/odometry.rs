@@ -2,7 +2,7 @@
 //! or IMU dead reckoning), writing the body trajectory as TUM for `milliego eval`.
 
 use clap::{Args, ValueEnum};
-use milliego_odometry::offline::{run as run_offline, Estimator, OfflineConfig};
+use milliego_odometry::offline::{run as run_offline, Estimator, OfflineConfig, TimeOffsetMode};
 use milliego_session::{write_tum, Session};
 use serde_json::json;
 use std::path::PathBuf;
@@ -51,6 +51,28 @@ pub struct OdometryArgs {
     /// velocity 0" with this deviation (default 0.5; 0 turns it off).
     #[arg(long)]
     vertical_bound: Option<f64>,
+    /// Radar-to-IMU time offset: `auto` estimates it online where the session cannot vouch for
+    /// the radar's stamps (imported scans timed by header stamps or arrival), `off` never, or a
+    /// number, the initial uncertainty in seconds to estimate it from (e.g. 0.05).
+    #[arg(long, default_value = "auto", value_parser = parse_time_offset)]
+    time_offset: TimeOffsetMode,
+    /// A known radar latency in seconds added to every radar frame's time (positive: frames
+    /// were taken later than stamped).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    radar_time_shift: f64,
+}
+
+fn parse_time_offset(s: &str) -> std::result::Result<TimeOffsetMode, String> {
+    match s {
+        "auto" => Ok(TimeOffsetMode::Auto),
+        "off" => Ok(TimeOffsetMode::Off),
+        _ => match s.parse::<f64>() {
+            Ok(v) if v.is_finite() && v > 0.0 => Ok(TimeOffsetMode::Estimate(v)),
+            _ => Err(format!(
+                "`{s}`: give auto, off, or the initial uncertainty in seconds (> 0)"
+            )),
+        },
+    }
 }
 
 pub fn run(a: OdometryArgs) -> Result<()> {
@@ -74,6 +96,8 @@ pub fn run(a: OdometryArgs) -> Result<()> {
     if let Some(v) = a.vertical_bound {
         cfg.rio.vertical_velocity_std = if v > 0.0 { v } else { f64::INFINITY };
     }
+    cfg.time_offset = a.time_offset;
+    cfg.radar_time_shift_s = a.radar_time_shift;
     if let Some(m) = a.near_field {
         cfg.ego.near_field_m = m;
     }
@@ -91,6 +115,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
             "radar_stream": {"frames_bad": r.radar.bad, "bytes_skipped": r.radar.bytes_skipped},
             "imu_stream": {"frames_bad": r.imu.bad, "bytes_skipped": r.imu.bytes_skipped, "not_samples": r.imu.not_samples, "pressure": r.imu.pressure},
             "clock_unsynced": r.clock_unsynced,
+            "radar_time_offset": match &r.time_offset { Some((o, sd, why)) => json!({"estimate_s": o, "std_s": sd, "why": why}), None => json!("not estimated (radar stamps trusted)") },
             "radar_clock": r.radar_clock.map(|c| json!({"offset_s": c.offset, "rate": c.rate, "residual_rms_s": c.residual_rms})),
             "imu_clock": r.imu_clock.map(|c| json!({"offset_s": c.offset, "rate": c.rate, "residual_rms_s": c.residual_rms})),
             "out": a.out.display().to_string(),

@@ -44,6 +44,39 @@ pub struct OfflineConfig {
     pub doppler_step_from_cfg: bool,
     /// Aid the height with the barometer readings in the IMU stream, when there are any.
     pub use_barometer: bool,
+    /// A known radar latency \[s\] added to every radar frame's time on the IMU clock
+    /// (positive: the frames were taken later than their stamps say).
+    pub radar_time_shift_s: f64,
+    /// Whether the filter estimates the radar-to-IMU time offset online.
+    pub time_offset: TimeOffsetMode,
+}
+
+/// When the filter estimates the radar-to-IMU time offset ([`RioConfig::time_offset_std`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TimeOffsetMode {
+    /// Where the session cannot vouch for its clocks: an imported radar stream not timed by a
+    /// trigger (header stamps or bag arrival times; [`untrusted_radar_timing`]). With the
+    /// default initial uncertainty [`TimeOffsetMode::DEFAULT_STD_S`].
+    Auto,
+    /// Never (the session's clock mapping is trusted).
+    Off,
+    /// Always, with this initial uncertainty \[s\].
+    Estimate(f64),
+}
+
+impl TimeOffsetMode {
+    /// Initial uncertainty of the offset when it is estimated and none was given \[s\]: the
+    /// late stamps of ti_mmwave_rospkg and USB-serial buffering are tens of milliseconds.
+    pub const DEFAULT_STD_S: f64 = 0.05;
+}
+
+/// Why the time offset is estimated for `session` under [`TimeOffsetMode::Auto`], or `None`
+/// (the one rule for the offline runner and `milliego run --session`).
+pub fn untrusted_radar_timing(session: &Session) -> Option<String> {
+    let import = session.meta.import.as_ref()?;
+    let radar = import.streams.iter().find(|s| s.stream == "radar")?;
+    (!radar.timing.starts_with("trigger"))
+        .then(|| format!("imported radar scans timed by {}", radar.timing))
 }
 
 impl Default for OfflineConfig {
@@ -59,6 +92,8 @@ impl Default for OfflineConfig {
             rest: c.rest,
             doppler_step_from_cfg: true,
             use_barometer: true,
+            radar_time_shift_s: 0.0,
+            time_offset: TimeOffsetMode::Auto,
         }
     }
 }
@@ -112,6 +147,10 @@ pub struct OfflineResult {
     /// True when the streams could not be put on one clock (no index): sensor clocks are then
     /// assumed to start together.
     pub clock_unsynced: bool,
+    /// The estimated radar-to-IMU time offset and its standard deviation \[s\] (a frame stamped
+    /// `t` was taken at `t + offset`), when it was estimated ([`OfflineConfig::time_offset`]),
+    /// and why.
+    pub time_offset: Option<(f64, f64, String)>,
 }
 
 /// Why a run could not start.
@@ -157,6 +196,17 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
     // One time base for both streams (the lower-envelope clock fits of the session crate).
     let clock = SessionClock::fit(session, &frames, &imu)?;
     let (radar_clock, imu_clock, clock_unsynced) = (clock.radar, clock.imu, clock.unsynced());
+    let mut rio = cfg.rio;
+    let offset_why = match cfg.time_offset {
+        TimeOffsetMode::Off => None,
+        TimeOffsetMode::Estimate(std) => {
+            rio.time_offset_std = std;
+            Some("asked for".to_string())
+        }
+        TimeOffsetMode::Auto => untrusted_radar_timing(session).inspect(|_| {
+            rio.time_offset_std = TimeOffsetMode::DEFAULT_STD_S;
+        }),
+    };
 
     // The Doppler quantisation step from the session's .cfg unless the caller set one: the same
     // rule as the runtime's (one place: `EgoConfig::with_velocity_resolution`).
@@ -172,7 +222,7 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
     }
     let mut runner = Runner::new(
         &ClassicalConfig {
-            rio: cfg.rio,
+            rio,
             ego,
             level_window_s: cfg.level_window_s,
             velocity_cov_scale: cfg.velocity_cov_scale,
@@ -187,7 +237,7 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
     let mut radar_times: Vec<(f64, usize)> = frames
         .iter()
         .enumerate()
-        .filter_map(|(i, f)| Some((clock.radar_s(f)?, i)))
+        .filter_map(|(i, f)| Some((clock.radar_s(f)? + cfg.radar_time_shift_s, i)))
         .collect();
     radar_times.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut trajectory = Vec::with_capacity(radar_times.len());
@@ -258,5 +308,10 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
         radar_clock,
         imu_clock,
         clock_unsynced,
+        time_offset: runner
+            .filter()
+            .and_then(|f| f.time_offset())
+            .zip(offset_why)
+            .map(|((o, sd), why)| (o, sd, why)),
     })
 }

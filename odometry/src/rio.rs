@@ -4,8 +4,9 @@
 //! Nominal state: position `p` and velocity `v` in the world frame, body-to-world rotation `q`,
 //! accelerometer bias `b_a`, gyroscope bias `b_g` (body = IMU frame), and, once a barometer
 //! reading came, the barometer bias `b_h` (barometric height minus the filter's). Error state
-//! (16): `dp, dv, dtheta` (body-frame rotation error, `q = q_hat * Exp(dtheta)`), `db_a`, `db_g`,
-//! `db_h` (zero variance until a barometer reading comes).
+//! (17): `dp, dv, dtheta` (body-frame rotation error, `q = q_hat * Exp(dtheta)`), `db_a`, `db_g`,
+//! `db_h` (zero variance until a barometer reading comes), and `dt_d`, the radar-to-IMU time
+//! offset (zero variance unless [`RioConfig::time_offset_std`] asks for it to be estimated).
 //!
 //! Measurement: the radar's velocity in its own frame,
 //! `h(x) = R_br^T (R^T v + (omega - b_g) x t_br)`, where `R_br`, `t_br` place the radar in the
@@ -14,15 +15,21 @@
 //!
 //! Time: the filter runs on the IMU clock. Radar measurements must already be mapped to it (the
 //! synchroniser's clock offset); a measurement is applied at the first IMU step at or after its
-//! time (at most one IMU period late).
+//! time (at most one IMU period late). Where that mapping is doubtful (host-stamped or imported
+//! streams without a trigger), the filter estimates what is left of the offset: a measurement
+//! stamped `t` was taken at `t + t_d`, and the prediction moves along the radar velocity's rate
+//! of change `J` (body acceleration, rotation, angular acceleration on the lever arm) by
+//! `J (t + t_d - now)`; `t_d` is observable whenever the body accelerates or turns.
 
 use crate::strapdown::{ImuSample, NavState, Strapdown};
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
 
-/// Error-state size: 15 inertial states and the barometer bias.
-const N: usize = 16;
+/// Error-state size: 15 inertial states, the barometer bias and the radar time offset.
+const N: usize = 17;
 /// Index of the barometer bias in the error state.
 const BARO: usize = 15;
+/// Index of the radar-to-IMU time offset in the error state.
+const TD: usize = 16;
 type Mn = SMatrix<f64, N, N>;
 type Vn = SVector<f64, N>;
 type M3xN = SMatrix<f64, 3, N>;
@@ -78,6 +85,12 @@ pub struct RioConfig {
     pub baro_std_m: f64,
     /// Barometer bias random walk \[m/sqrt(s)\] (weather, temperature).
     pub baro_bias_walk: f64,
+    /// Initial uncertainty of the radar-to-IMU time offset \[s\]: 0 trusts the clock mapping
+    /// (sessions with a timing index, trigger-timed imports, the sensor hub); above 0 the offset
+    /// is estimated online from the Doppler updates ([`Rio::time_offset`]).
+    pub time_offset_std: f64,
+    /// Random walk of the estimated time offset \[s/sqrt(s)\] (clock drift between the fits).
+    pub time_offset_walk: f64,
 }
 
 impl Default for RioConfig {
@@ -100,6 +113,8 @@ impl Default for RioConfig {
             time_sigma_s: 0.005,
             baro_std_m: 0.3,
             baro_bias_walk: 0.02,
+            time_offset_std: 0.0,
+            time_offset_walk: 1e-4,
         }
     }
 }
@@ -186,6 +201,64 @@ impl Pending {
     }
 }
 
+/// IMU steps remembered for moving a radar prediction back in time (time offset estimation):
+/// 256 steps are 0.64 s at 400 Hz, 2.56 s at 100 Hz.
+const HISTORY: usize = 256;
+
+/// What each recent IMU step did to the predicted radar velocity: propagation only, corrections
+/// excluded, so the prediction at an earlier time `tau` is the current one less the steps'
+/// changes since `tau` (the errors of the state then and now are taken as equal).
+#[derive(Debug, Clone)]
+struct StepHistory {
+    /// Step start and end times \[s\].
+    span: [(f64, f64); HISTORY],
+    /// Change of the predicted radar velocity over the step \[m/s, radar frame\].
+    change: [Vector3<f64>; HISTORY],
+    /// Next slot.
+    head: usize,
+    /// Slots in use.
+    len: usize,
+}
+
+impl StepHistory {
+    fn new() -> Self {
+        StepHistory {
+            span: [(0.0, 0.0); HISTORY],
+            change: [Vector3::zeros(); HISTORY],
+            head: 0,
+            len: 0,
+        }
+    }
+
+    fn push(&mut self, t0: f64, t1: f64, change: Vector3<f64>) {
+        self.span[self.head] = (t0, t1);
+        self.change[self.head] = change;
+        self.head = (self.head + 1) % HISTORY;
+        self.len = (self.len + 1).min(HISTORY);
+    }
+
+    /// The change of the prediction from `tau` to the newest step's end, and its rate at `tau`
+    /// \[m/s^2\]; `None` when `tau` is older than the history.
+    fn since(&self, tau: f64) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        let mut acc = Vector3::zeros();
+        for k in 0..self.len {
+            let i = (self.head + HISTORY - 1 - k) % HISTORY;
+            let (t0, t1) = self.span[i];
+            let dt = t1 - t0;
+            if tau >= t0 {
+                let rate = if dt > 0.0 {
+                    self.change[i] / dt
+                } else {
+                    Vector3::zeros()
+                };
+                return Some((acc + rate * (t1 - tau).max(0.0), rate));
+            }
+            acc += self.change[i];
+        }
+        None
+    }
+}
+
 /// The filter.
 #[derive(Debug, Clone)]
 pub struct Rio {
@@ -204,6 +277,10 @@ pub struct Rio {
     nis_sum: f64,
     /// Barometer bias \[m\] (barometric height minus the filter's), once a reading came.
     baro_bias: Option<f64>,
+    /// Radar-to-IMU time offset \[s\]: a radar measurement stamped `t` was taken at `t + t_d`.
+    time_offset: f64,
+    /// Recent steps' changes of the radar prediction (only while the offset is estimated).
+    history: StepHistory,
 }
 
 impl Rio {
@@ -221,6 +298,9 @@ impl Rio {
         p[(8, 8)] = 1e-6; // yaw: the origin's heading is the reference
         set(&mut p, 9, cfg.init_accel_bias_std);
         set(&mut p, 12, cfg.init_gyro_bias_std);
+        if cfg.time_offset_std.is_finite() && cfg.time_offset_std > 0.0 {
+            p[(TD, TD)] = cfg.time_offset_std * cfg.time_offset_std;
+        }
         Rio {
             cfg,
             mount,
@@ -235,6 +315,8 @@ impl Rio {
             gated_run: 0,
             nis_sum: 0.0,
             baro_bias: None,
+            time_offset: 0.0,
+            history: StepHistory::new(),
         }
     }
 
@@ -267,7 +349,7 @@ impl Rio {
         (self.nav.accel_bias, self.nav.gyro_bias)
     }
 
-    /// Error-state covariance (order: p, v, theta, b_a, b_g).
+    /// Error-state covariance (order: p, v, theta, b_a, b_g, b_h, t_d).
     pub fn covariance(&self) -> &Mn {
         &self.p
     }
@@ -275,6 +357,18 @@ impl Rio {
     /// Counters.
     pub fn counters(&self) -> &RioCounters {
         &self.counters
+    }
+
+    /// The estimated radar-to-IMU time offset and its standard deviation \[s\] (a radar
+    /// measurement stamped `t` was taken at `t + offset`), when it is estimated
+    /// ([`RioConfig::time_offset_std`]).
+    pub fn time_offset(&self) -> Option<(f64, f64)> {
+        self.estimates_time_offset()
+            .then(|| (self.time_offset, self.p[(TD, TD)].max(0.0).sqrt()))
+    }
+
+    fn estimates_time_offset(&self) -> bool {
+        self.cfg.time_offset_std.is_finite() && self.cfg.time_offset_std > 0.0
     }
 
     /// Mean normalised innovation square of the applied radar updates (3 for a consistent
@@ -287,6 +381,12 @@ impl Rio {
     /// Propagates with one IMU sample, then applies any radar measurement now due.
     pub fn push_imu(&mut self, s: ImuSample) {
         let before = *self.nav.state();
+        let track = self.started && self.estimates_time_offset();
+        let pred_before = if track {
+            self.radar_model().0
+        } else {
+            Vector3::zeros()
+        };
         let rejected = self.nav.rejected;
         self.nav.push(s);
         let gyro = Vector3::from(s.gyro);
@@ -306,6 +406,10 @@ impl Rio {
         self.counters.imu_samples += 1;
         let dt = self.nav.state().t - before.t;
         self.propagate_cov(&before, &s, dt);
+        if track {
+            let change = self.radar_model().0 - pred_before;
+            self.history.push(before.t, self.nav.state().t, change);
+        }
         let now = self.nav.state().t;
         // In queue order, without a temporary vector (the runtime's hot path allocates nothing).
         while let Some(i) = self.pending.iter().position(|m| m.t() <= now) {
@@ -438,6 +542,9 @@ impl Rio {
         if self.baro_bias.is_some() {
             q[(BARO, BARO)] = c.baro_bias_walk * c.baro_bias_walk * dt;
         }
+        if self.estimates_time_offset() {
+            q[(TD, TD)] = c.time_offset_walk * c.time_offset_walk * dt;
+        }
         self.p = fm * self.p * fm.transpose() + q;
         self.p = (self.p + self.p.transpose()) * 0.5;
     }
@@ -464,6 +571,12 @@ impl Rio {
         if !(ts.is_finite() && ts > 0.0) {
             return Matrix3::zeros();
         }
+        let j = self.velocity_rate();
+        j * j.transpose() * (ts * ts)
+    }
+
+    /// Rate of change of the predicted radar velocity \[m/s^2, radar frame\].
+    fn velocity_rate(&self) -> Vector3<f64> {
         let st = self.nav.state();
         let r_wb = st.q.to_rotation_matrix().into_inner();
         let r_br = self.mount.rotation.to_rotation_matrix().into_inner();
@@ -473,9 +586,7 @@ impl Rio {
         // d/dt of R_br^T (v_b + w x t): body acceleration minus the rotation of v_b, plus the
         // angular acceleration on the lever arm.
         let a_b = self.last_accel - self.nav.accel_bias + g_b;
-        let j = r_br.transpose()
-            * (a_b - w.cross(&v_b) + self.angular_accel.cross(&self.mount.translation));
-        j * j.transpose() * (ts * ts)
+        r_br.transpose() * (a_b - w.cross(&v_b) + self.angular_accel.cross(&self.mount.translation))
     }
 
     /// Predicted radar velocity and its Jacobian with respect to the error state.
@@ -510,7 +621,23 @@ impl Rio {
     }
 
     fn update_gated(&mut self, m: &VelocityMeasurement, gate: bool) {
-        let (pred, h) = self.radar_model();
+        let (mut pred, mut h) = self.radar_model();
+        if self.estimates_time_offset() {
+            // The measurement was taken at tau = m.t + t_d: move the prediction there, along the
+            // recent steps when tau is past (the motion between tau and now is what they did),
+            // along the current rate of change when it is ahead.
+            let tau = m.t + self.time_offset;
+            let now = self.nav.state().t;
+            let (shift, rate) = match (tau < now).then(|| self.history.since(tau)).flatten() {
+                Some((change, rate)) => (-change, rate),
+                None => {
+                    let j = self.velocity_rate();
+                    (j * (tau - now), j)
+                }
+            };
+            pred += shift;
+            h.set_column(TD, &rate);
+        }
         let rm = Matrix3::from_fn(|i, j| m.covariance[i][j]) + self.timing_covariance();
         let y = Vector3::from(m.velocity) - pred;
         let s = h * self.p * h.transpose() + rm;
@@ -640,6 +767,7 @@ impl Rio {
         if let Some(b) = self.baro_bias.as_mut() {
             *b += dx[BARO];
         }
+        self.time_offset += dx[TD];
         self.nav.set_state(ns);
     }
 }

@@ -254,6 +254,14 @@ impl Plan {
                 }
                 cfg.sync.radar_enabled = s.radar.is_some();
                 cfg.sync.imu_enabled = s.imu.is_some();
+                // Radar stamps the session cannot vouch for: the filter estimates the offset
+                // (the offline runner's rule, `TimeOffsetMode::Auto`).
+                if cfg.classical.rio.time_offset_std == 0.0
+                    && milliego_odometry::offline::untrusted_radar_timing(&s).is_some()
+                {
+                    cfg.classical.rio.time_offset_std =
+                        milliego_odometry::offline::TimeOffsetMode::DEFAULT_STD_S;
+                }
                 session = Some(s);
             }
             Input::Devices(d) => {
@@ -380,7 +388,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
     let (h_sync, sync_counters, clocks) = sync_thread
         .join()
         .map_err(|_| RunError::Panicked { thread: "sync" })?;
-    let (h_est, stage_counters) = stage_thread
+    let (h_est, stage_counters, radar_time_offset) = stage_thread
         .join()
         .map_err(|_| RunError::Panicked { thread: "estimate" })?;
     let out = out_thread
@@ -401,6 +409,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         sync: sync_counters,
         clocks,
         stage: stage_counters,
+        radar_time_offset,
         out: &out,
         radar_report: session_radar_report.as_ref(),
     };
@@ -670,12 +679,16 @@ fn spawn_sync(
     })
 }
 
+/// What the estimator stage hands back: its latency histogram, its counters and the radar time
+/// offset its estimators estimated (estimate, deviation \[s\]).
+type StageEnd = (Histogram, StageCounters, Option<(f64, f64)>);
+
 /// The estimator thread: events -> poses (live, a full pose queue drops its oldest).
 fn spawn_stage(
     sh: &Arc<Shared>,
     stage_cfg: StageConfig,
     built: Built,
-) -> Result<std::thread::JoinHandle<(Histogram, StageCounters)>, RunError> {
+) -> Result<std::thread::JoinHandle<StageEnd>, RunError> {
     let sh2 = Arc::clone(sh);
     spawn_named("estimate", move || {
         let mut stage = Stage::new(stage_cfg, built);
@@ -705,7 +718,8 @@ fn spawn_stage(
             hist.record(sh2.now_ns().saturating_sub(t0));
         }
         sh2.stage_done.store(true, Ordering::Release);
-        (hist, stage.counters)
+        let offset = stage.radar_time_offset();
+        (hist, stage.counters, offset)
     })
 }
 
@@ -809,6 +823,7 @@ struct RunEnds<'a> {
     sync: SyncCounters,
     clocks: Clocks,
     stage: StageCounters,
+    radar_time_offset: Option<(f64, f64)>,
     out: &'a OutputEnd,
     radar_report: Option<&'a StreamReport>,
 }
@@ -850,6 +865,14 @@ fn run_summary(e: &RunEnds<'_>, sh: &Shared, c: &InputCounters, latency: &Latenc
                 "{} readings, not used by this estimator",
                 load(&c.decoded[2])
             )
+        },
+        radar_time_offset: match e.radar_time_offset {
+            Some((o, sd)) => format!(
+                "estimated: radar frames taken {:.1} ms after their stamps (+- {:.1} ms)",
+                o * 1e3,
+                sd * 1e3
+            ),
+            None => "not estimated: the radar stamps are trusted".into(),
         },
         frames_out: FramesOut {
             poses_sent: u64::from(e.out.sent),

@@ -99,6 +99,17 @@ impl std::fmt::Debug for Stage {
 }
 
 impl Stage {
+    /// The radar-to-IMU time offset the estimators estimated \[s\] (estimate, deviation), the
+    /// primary's first.
+    pub fn radar_time_offset(&self) -> Option<(f64, f64)> {
+        self.built.primary.radar_time_offset().or_else(|| {
+            self.built
+                .fallback
+                .as_ref()
+                .and_then(|f| f.radar_time_offset())
+        })
+    }
+
     /// A stage running `built`.
     pub fn new(cfg: StageConfig, built: Built) -> Self {
         Stage {

@@ -19,6 +19,10 @@ pub struct RunSummary {
     /// Whether a barometer aided the height (or that the input had none).
     #[serde(default)]
     pub barometer: String,
+    /// The radar-to-IMU time offset, when it was estimated (imported radar scans not timed by a
+    /// trigger), or that the stamps were trusted.
+    #[serde(default)]
+    pub radar_time_offset: String,
     /// What the estimator stage and the outputs produced.
     pub frames_out: FramesOut,
     /// Items dropped by every queue and buffer.

@@ -51,6 +51,10 @@ impl Classical {
 }
 
 impl Estimator for Classical {
+    fn radar_time_offset(&self) -> Option<(f64, f64)> {
+        self.runner.filter().and_then(|f| f.time_offset())
+    }
+
     fn name(&self) -> &'static str {
         if self.runner.uses_radar() {
             "doppler"

@@ -104,6 +104,11 @@ pub trait Estimator: Send {
     fn push_radar(&mut self, f: &RadarInput<'_>) -> Result<Option<RelativePose>, EstimatorError>;
     /// False when the estimator's outputs should not be trusted.
     fn healthy(&self) -> bool;
+    /// The radar-to-IMU time offset the estimator estimated and its standard deviation \[s\],
+    /// when it estimates one.
+    fn radar_time_offset(&self) -> Option<(f64, f64)> {
+        None
+    }
 }
 
 /// Which estimator a run uses.
