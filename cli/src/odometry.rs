@@ -51,9 +51,10 @@ pub struct OdometryArgs {
     /// velocity 0" with this deviation (default 0.5; 0 turns it off).
     #[arg(long)]
     vertical_bound: Option<f64>,
-    /// Radar-to-IMU time offset: `auto` estimates it online where the session cannot vouch for
-    /// the radar's stamps (imported scans timed by header stamps or arrival), `off` never, or a
-    /// number, the initial uncertainty in seconds to estimate it from (e.g. 0.05).
+    /// Radar-to-IMU time offset: `auto` estimates it online where the session's radar times are
+    /// late by an unknown amount (imported scans timed by their arrival in the bag), `off`
+    /// never, or a number, the initial uncertainty in seconds to estimate it from (e.g. 0.05,
+    /// for a driver that stamps scans when it publishes them).
     #[arg(long, default_value = "auto", value_parser = parse_time_offset)]
     time_offset: TimeOffsetMode,
     /// A known radar latency in seconds added to every radar frame's time (positive: frames

@@ -54,9 +54,13 @@ pub struct OfflineConfig {
 /// When the filter estimates the radar-to-IMU time offset ([`RioConfig::time_offset_std`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum TimeOffsetMode {
-    /// Where the session cannot vouch for its clocks: an imported radar stream not timed by a
-    /// trigger (header stamps or bag arrival times; [`untrusted_radar_timing`]). With the
-    /// default initial uncertainty [`TimeOffsetMode::DEFAULT_STD_S`].
+    /// Where the session says its radar times are late by an unknown amount: imported scans
+    /// timed by their arrival in the bag (zero header stamps, no trigger;
+    /// [`untrusted_radar_timing`]). With the default initial uncertainty
+    /// [`TimeOffsetMode::DEFAULT_STD_S`]. Header stamps are trusted (the ROS convention: the
+    /// sensor's time); a driver known to stamp late wants [`TimeOffsetMode::Estimate`]: on a
+    /// session with right stamps, estimating costs accuracy (a short walk: 1.33 m ATE against
+    /// 1.18 m).
     Auto,
     /// Never (the session's clock mapping is trusted).
     Off,
@@ -75,7 +79,9 @@ impl TimeOffsetMode {
 pub fn untrusted_radar_timing(session: &Session) -> Option<String> {
     let import = session.meta.import.as_ref()?;
     let radar = import.streams.iter().find(|s| s.stream == "radar")?;
-    (!radar.timing.starts_with("trigger"))
+    radar
+        .timing
+        .starts_with("arrival")
         .then(|| format!("imported radar scans timed by {}", radar.timing))
 }
 
