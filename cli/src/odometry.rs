@@ -61,6 +61,10 @@ pub struct OdometryArgs {
     /// were taken later than stamped).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     radar_time_shift: f64,
+    /// The rig is a ground vehicle (car, wheeled robot): its body frame's lateral and vertical
+    /// velocity are held at zero within 0.1 m/s at each radar frame (body frame: x forward, z up).
+    #[arg(long)]
+    vehicle: bool,
 }
 
 fn parse_time_offset(s: &str) -> std::result::Result<TimeOffsetMode, String> {
@@ -98,6 +102,9 @@ pub fn run(a: OdometryArgs) -> Result<()> {
         cfg.rio.vertical_velocity_std = if v > 0.0 { v } else { f64::INFINITY };
     }
     cfg.time_offset = a.time_offset;
+    if a.vehicle {
+        cfg = cfg.ground_vehicle();
+    }
     cfg.radar_time_shift_s = a.radar_time_shift;
     if let Some(m) = a.near_field {
         cfg.ego.near_field_m = m;
@@ -113,6 +120,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
             "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "vertical_bounds": r.vertical_bounds, "nis_mean": r.nis_mean},
             "barometer": if r.pressure_readings == 0 { json!("none in the session: height from radar and IMU only") } else if a.no_barometer { json!(format!("{} readings ignored (--no-barometer)", r.pressure_readings)) } else { json!({"readings": r.pressure_readings, "updates": r.baro_updates, "rejected": r.baro_rejected}) },
             "near_field_points": r.near_field_points,
+            "ground_vehicle": if a.vehicle { json!({"applied": r.nonholonomic.0, "gated": r.nonholonomic.1}) } else { json!("not asked (--vehicle)") },
             "radar_stream": {"frames_bad": r.radar.bad, "bytes_skipped": r.radar.bytes_skipped},
             "imu_stream": {"frames_bad": r.imu.bad, "bytes_skipped": r.imu.bytes_skipped, "not_samples": r.imu.not_samples, "pressure": r.imu.pressure},
             "clock_unsynced": r.clock_unsynced,

@@ -9,6 +9,7 @@ use milliego_models::offline::run_session;
 use milliego_models::Model;
 use milliego_odometry::offline::{run as run_offline, Estimator, OfflineConfig};
 use milliego_session::Session;
+use milliego_sim::motion::MotionKind;
 use milliego_sim::scenario::run as simulate;
 use milliego_sim::split::{Set, SplitVersion};
 use serde_json::json;
@@ -134,14 +135,17 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         for ((_, est), (_, out)) in estimators.iter_mut().zip(per.iter_mut()) {
             let trajectory = match est {
                 Column::Classical(est) => {
-                    run_offline(
-                        &s,
-                        &OfflineConfig {
-                            estimator: *est,
-                            ..OfflineConfig::default()
-                        },
-                    )?
-                    .trajectory
+                    let cfg = OfflineConfig {
+                        estimator: *est,
+                        ..OfflineConfig::default()
+                    };
+                    // What the rig's operator knows and says (`odometry --vehicle`): a car.
+                    let cfg = if e.scenario().motion == MotionKind::Vehicle {
+                        cfg.ground_vehicle()
+                    } else {
+                        cfg
+                    };
+                    run_offline(&s, &cfg)?.trajectory
                 }
                 Column::Model(m) => run_session(m, &s)?.trajectory,
             };

@@ -68,6 +68,20 @@ pub enum TimeOffsetMode {
     Estimate(f64),
 }
 
+impl OfflineConfig {
+    /// For a ground vehicle (car, wheeled robot on a floor): its lateral and vertical velocity
+    /// are zero within [`GROUND_VEHICLE_STD`] in the session's body frame
+    /// ([`RioConfig::nonholonomic_std`]).
+    pub fn ground_vehicle(mut self) -> Self {
+        self.rio.nonholonomic_std = GROUND_VEHICLE_STD;
+        self
+    }
+}
+
+/// Deviation of a ground vehicle's lateral and vertical velocity from zero \[m/s\] (tyre slip,
+/// suspension, bumps).
+pub const GROUND_VEHICLE_STD: f64 = 0.1;
+
 impl TimeOffsetMode {
     /// Initial uncertainty of the offset when it is estimated and none was given \[s\]: the
     /// late stamps of ti_mmwave_rospkg and USB-serial buffering are tens of milliseconds.
@@ -141,6 +155,9 @@ pub struct OfflineResult {
     pub baro_updates: u64,
     /// Barometric heights rejected (gate, or not finite).
     pub baro_rejected: u64,
+    /// Ground vehicle constraints applied and rejected by their gate
+    /// ([`RioConfig::nonholonomic_std`]).
+    pub nonholonomic: (u64, u64),
     /// Radar points that did not vote as possible near-field leakage
     /// ([`EgoConfig::near_field_m`]).
     pub near_field_points: u64,
@@ -309,6 +326,7 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
         pressure_readings: baro.len(),
         baro_updates: filter.baro_updates,
         baro_rejected: filter.baro_rejected,
+        nonholonomic: (filter.nonholonomic_updates, filter.nonholonomic_gated),
         near_field_points: c.near_field_points,
         imu_samples: imu.len(),
         radar_clock,

@@ -91,6 +91,10 @@ pub struct RioConfig {
     pub time_offset_std: f64,
     /// Random walk of the estimated time offset \[s/sqrt(s)\] (clock drift between the fits).
     pub time_offset_walk: f64,
+    /// Ground vehicle constraint \[m/s\]: at each radar frame the vehicle frame's lateral and
+    /// vertical velocity are 0 with this deviation (a car does not slide sideways or lift off;
+    /// [`Rio::set_vehicle_frame`] places that frame); `f64::INFINITY`: not a ground vehicle.
+    pub nonholonomic_std: f64,
 }
 
 impl Default for RioConfig {
@@ -115,6 +119,7 @@ impl Default for RioConfig {
             baro_bias_walk: 0.02,
             time_offset_std: 0.0,
             time_offset_walk: 1e-4,
+            nonholonomic_std: f64::INFINITY,
         }
     }
 }
@@ -170,10 +175,16 @@ pub struct RioCounters {
     pub baro_updates: u64,
     /// Barometric heights rejected (not finite, or outside a 99.9% gate).
     pub baro_rejected: u64,
+    /// Ground vehicle constraints applied ([`RioConfig::nonholonomic_std`]).
+    pub nonholonomic_updates: u64,
+    /// Ground vehicle constraints rejected by their gate (a skid, a jump).
+    pub nonholonomic_gated: u64,
 }
 
 /// Chi-square gate for one degree of freedom (99.9%).
 const GATE_1DOF: f64 = 10.83;
+/// Chi-square gate for two degrees of freedom (99.9%).
+const GATE_2DOF: f64 = 13.82;
 
 /// Altitude \[m\] of pressure `pa` \[Pa\] in the standard atmosphere
 /// (`44330.8 (1 - (p / 101325)^0.190263)`); only differences matter to the filter.
@@ -281,6 +292,8 @@ pub struct Rio {
     time_offset: f64,
     /// Recent steps' changes of the radar prediction (only while the offset is estimated).
     history: StepHistory,
+    /// The vehicle frame in the IMU frame (x forward, z up), for the ground vehicle constraint.
+    vehicle: RadarMount,
 }
 
 impl Rio {
@@ -317,7 +330,15 @@ impl Rio {
             baro_bias: None,
             time_offset: 0.0,
             history: StepHistory::new(),
+            vehicle: RadarMount::default(),
         }
+    }
+
+    /// Places the vehicle frame (x forward, y left, z up; its origin where the vehicle does not
+    /// slide sideways, e.g. the rear axle) in the IMU frame, for
+    /// [`RioConfig::nonholonomic_std`]. Default: the IMU frame itself.
+    pub fn set_vehicle_frame(&mut self, vehicle_in_imu: RadarMount) {
+        self.vehicle = vehicle_in_imu;
     }
 
     /// Levels the initial attitude from a stationary accelerometer reading (roll and pitch from
@@ -414,8 +435,14 @@ impl Rio {
         // In queue order, without a temporary vector (the runtime's hot path allocates nothing).
         while let Some(i) = self.pending.iter().position(|m| m.t() <= now) {
             match self.pending.remove(i) {
-                Pending::Velocity(m) => self.update(&m),
-                Pending::Frame(_) => self.bound_vertical(true),
+                Pending::Velocity(m) => {
+                    self.update(&m);
+                    self.nonholonomic();
+                }
+                Pending::Frame(_) => {
+                    self.bound_vertical(true);
+                    self.nonholonomic();
+                }
                 Pending::Height(_, h) => self.height_update(h),
             }
         }
@@ -591,10 +618,43 @@ impl Rio {
 
     /// Predicted radar velocity and its Jacobian with respect to the error state.
     fn radar_model(&self) -> (Vector3<f64>, M3xN) {
+        self.frame_velocity(&self.mount)
+    }
+
+    /// Ground vehicle constraint ([`RioConfig::nonholonomic_std`]): the vehicle frame's lateral
+    /// and vertical velocity are zero, gated (2 dof, 99.9%). Heading is kept out of the gain as
+    /// for radar updates (body-frame velocity cannot observe it).
+    fn nonholonomic(&mut self) {
+        let std = self.cfg.nonholonomic_std;
+        if !(std.is_finite() && std > 0.0) {
+            return;
+        }
+        let (pred, mut h) = self.frame_velocity(&self.vehicle);
+        // Row 0 (forward) is free: a zero row with zero innovation changes nothing.
+        h.row_mut(0).fill(0.0);
+        let y = Vector3::new(0.0, -pred.y, -pred.z);
+        let rm = Matrix3::from_diagonal(&Vector3::new(1.0, std * std, std * std));
+        let s = h * self.p * h.transpose() + rm;
+        let Some(si) = s.try_inverse() else {
+            self.counters.nonholonomic_gated += 1;
+            return;
+        };
+        let d2 = (y.transpose() * si * y)[(0, 0)];
+        if !(d2.is_finite() && d2 <= GATE_2DOF) {
+            self.counters.nonholonomic_gated += 1;
+            return;
+        }
+        self.correct(&y, &h, &rm, &si, !self.cfg.radar_heading);
+        self.counters.nonholonomic_updates += 1;
+    }
+
+    /// Velocity of a frame fixed on the body (`at`: its rotation and origin in the IMU frame), in
+    /// that frame \[m/s\], and its Jacobian with respect to the error state.
+    fn frame_velocity(&self, at: &RadarMount) -> (Vector3<f64>, M3xN) {
         let st = self.nav.state();
         let r_wb = st.q.to_rotation_matrix().into_inner();
-        let r_br = self.mount.rotation.to_rotation_matrix().into_inner();
-        let t_br = self.mount.translation;
+        let r_br = at.rotation.to_rotation_matrix().into_inner();
+        let t_br = at.translation;
         let w = self.last_gyro - self.nav.gyro_bias;
         let v_b = r_wb.transpose() * st.v;
         let pred = r_br.transpose() * (v_b + w.cross(&t_br));

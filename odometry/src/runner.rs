@@ -326,6 +326,16 @@ impl Runner {
         self.out.pop_front()
     }
 
+    /// A new filter with the body frame as its vehicle frame (the ground vehicle constraint
+    /// holds in the session's body frame).
+    fn filter_from(&self, mut rio: Rio) -> Rio {
+        rio.set_vehicle_frame(RadarMount {
+            rotation: self.q_ib,
+            translation: self.t_ib,
+        });
+        rio
+    }
+
     /// One IMU sample (IMU frame: specific force \[m/s^2\], rate of turn \[rad/s\]; time \[s\]).
     pub fn push_imu(&mut self, s: ImuSample) {
         self.last_imu_t = Some(s.t);
@@ -333,7 +343,7 @@ impl Runner {
             // The IMU is back after a gap the radar bridged: re-anchor a fresh filter at the
             // dead-reckoned state (tilt and biases re-learned, the pose kept).
             let st = NavState { t: s.t, ..d };
-            self.rio = Some(Rio::new(self.cfg.rio, self.mount, st));
+            self.rio = Some(self.filter_from(Rio::new(self.cfg.rio, self.mount, st)));
             self.counters.imu_restarts += 1;
         }
         if self.rio.is_none() {
@@ -658,7 +668,8 @@ impl Runner {
             .iter()
             .fold(Vector3::zeros(), |a, s| a + Vector3::from(s.accel))
             / n;
-        self.rio = Some(Rio::levelled(self.cfg.rio, self.mount, t0, mean_f.into()));
+        self.rio =
+            Some(self.filter_from(Rio::levelled(self.cfg.rio, self.mount, t0, mean_f.into())));
         let early = std::mem::take(&mut self.early);
         let level = std::mem::take(&mut self.level);
         let mut next = 0;
