@@ -30,6 +30,8 @@ const N: usize = 17;
 const BARO: usize = 15;
 /// Index of the radar-to-IMU time offset in the error state.
 const TD: usize = 16;
+/// Largest radar-to-IMU time offset the filter estimates \[s\].
+const MAX_TIME_OFFSET_S: f64 = 0.5;
 type Mn = SMatrix<f64, N, N>;
 type Vn = SVector<f64, N>;
 type M3xN = SMatrix<f64, 3, N>;
@@ -827,7 +829,8 @@ impl Rio {
         if let Some(b) = self.baro_bias.as_mut() {
             *b += dx[BARO];
         }
-        self.time_offset += dx[TD];
+        // Beyond half a second the clock mapping is broken, not offset: held at the bound.
+        self.time_offset = (self.time_offset + dx[TD]).clamp(-MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S);
         self.nav.set_state(ns);
     }
 }
