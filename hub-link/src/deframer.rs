@@ -107,6 +107,17 @@ impl<const N: usize> Deframer<N> {
         self.len + self.overflow
     }
 
+    /// Forgets an unfinished frame (the stream was interrupted, e.g. the port was reopened): its
+    /// bytes are counted in [`DeframerCounters::bytes_dropped`]; the counters are kept. Returns
+    /// the bytes dropped \[B\].
+    pub fn resync(&mut self) -> usize {
+        let dropped = self.buffered();
+        self.counters.bytes_dropped += dropped as u64;
+        self.len = 0;
+        self.overflow = 0;
+        dropped
+    }
+
     /// Consumes bytes from `input` (advancing it) up to the next complete frame.
     pub fn poll(&mut self, input: &mut &[u8]) -> Event<'_> {
         while let Some((&b, rest)) = input.split_first() {

@@ -196,3 +196,32 @@ fn oversize_frames_and_garbage_are_counted() {
     );
     assert_eq!(c.bytes_dropped, bytes.len() as u64);
 }
+
+#[test]
+fn resync_drops_the_partial_frame_and_keeps_the_counters() {
+    let h = Header {
+        seq: 4,
+        t_ns: 9,
+        ..Header::default()
+    };
+    let m = Message::Imu {
+        header: h,
+        bytes: &[0xFA, 0xFF, 0x36, 0x00, 0xCB],
+    };
+    let w = wire(&m);
+    let mut d: Box<Deframer<FRAME_MAX>> = Box::default();
+    let mut input = &w[..];
+    assert!(matches!(d.poll(&mut input), Event::Message(_)));
+    // Half a frame, then the stream is interrupted (port reopened).
+    let mut input = &w[..w.len() / 2];
+    assert_eq!(d.poll(&mut input), Event::NeedMore);
+    assert_eq!(d.resync(), w.len() / 2);
+    assert_eq!(d.buffered(), 0);
+    // The next whole frame decodes (without the resync it would be glued to the half frame).
+    let mut input = &w[..];
+    assert_eq!(d.poll(&mut input), Event::Message(m));
+    let c = d.counters();
+    assert_eq!(c.messages_ok, 2);
+    assert_eq!(c.bytes_in, (2 * w.len() + w.len() / 2) as u64);
+    assert_eq!(c.bytes_dropped, (w.len() / 2) as u64);
+}
