@@ -1,4 +1,4 @@
-//! The LM3S6965's registers this firmware touches (system control, three PL011-type UARTs, the
+//! The LM3S6965's registers this firmware touches (system control, the UART pins' GPIO ports,
 //! NVIC, SysTick), by address: no PAC needed.
 
 use core::ptr::{read_volatile, write_volatile};
@@ -8,12 +8,21 @@ use core::sync::atomic::{AtomicU32, Ordering};
 pub const BAUD_LINK: u32 = 921_600;
 /// Radar data UART rate \[bit/s\].
 pub const BAUD_RADAR: u32 = 921_600;
-/// IMU UART rate \[bit/s\].
-pub const BAUD_IMU: u32 = 115_200;
+/// IMU UART rate \[bit/s\] (the simulated MTi-1 sessions run at 921600; an MTi leaves the
+/// factory at 115200).
+pub const BAUD_IMU: u32 = 921_600;
 
 const SYSCTL_RIS: usize = 0x400F_E050;
 const SYSCTL_RCC: usize = 0x400F_E060;
 const SYSCTL_RCGC1: usize = 0x400F_E104;
+const SYSCTL_RCGC2: usize = 0x400F_E108;
+/// GPIO ports A, D and G (the UARTs' pins) and their alternate-function and digital-enable
+/// registers.
+const GPIO_A: usize = 0x4000_4000;
+const GPIO_D: usize = 0x4000_7000;
+const GPIO_G: usize = 0x4002_6000;
+const GPIO_AFSEL: usize = 0x420;
+const GPIO_DEN: usize = 0x51C;
 const SYST_CSR: usize = 0xE000_E010;
 const SYST_RVR: usize = 0xE000_E014;
 const SYST_CVR: usize = 0xE000_E018;
@@ -123,7 +132,7 @@ impl Uart {
 }
 
 /// 50 MHz from the PLL (8 MHz crystal, 400 MHz VCO / 2 / SYSDIV 4), as the evaluation board's
-/// examples do; enables the UART clocks.
+/// examples do; enables the UART and GPIO clocks and routes the UART pins.
 pub fn init_clock() {
     let mut rcc = rd(SYSCTL_RCC);
     // Bypass the PLL and stop the divider while changing it.
@@ -141,8 +150,19 @@ pub fn init_clock() {
     }
     wr(SYSCTL_RCC, rcc & !(1 << 11));
     wr(SYSCTL_RCGC1, rd(SYSCTL_RCGC1) | 0x7);
+    // GPIO A, D, G.
+    wr(
+        SYSCTL_RCGC2,
+        rd(SYSCTL_RCGC2) | (1 << 0) | (1 << 3) | (1 << 6),
+    );
     // A few cycles for the peripheral clocks to start.
     cortex_m::asm::delay(16);
+    // The UART pins: U0Rx/U0Tx PA0/PA1, U1Rx/U1Tx PD2/PD3, U2Rx/U2Tx PG0/PG1, as the alternate
+    // (UART) function. QEMU does not route pins; a real board receives nothing without this.
+    for (port, pins) in [(GPIO_A, 0x03), (GPIO_D, 0x0C), (GPIO_G, 0x03)] {
+        wr(port + GPIO_AFSEL, rd(port + GPIO_AFSEL) | pins);
+        wr(port + GPIO_DEN, rd(port + GPIO_DEN) | pins);
+    }
 }
 
 static WRAPS: AtomicU32 = AtomicU32::new(0);

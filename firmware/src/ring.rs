@@ -90,17 +90,23 @@ impl<const N: usize> Ring<N> {
     }
 }
 
-/// Receive-interrupt stamps: (bytes received so far, timer ticks) per interrupt.
+/// Receive-interrupt stamps: (bytes received so far, timer ticks) per interrupt. The receive
+/// interrupt pushes; the main loop reads and prunes inside critical sections, so the two never
+/// interleave (the sensor interrupts share one priority and do not preempt each other).
 pub struct StampRing<const N: usize> {
-    ends: UnsafeCell<[u32; N]>,
-    ticks: UnsafeCell<[u64; N]>,
-    head: AtomicU32,
-    tail: AtomicU32,
+    inner: UnsafeCell<Stamps<N>>,
     merged: AtomicU32,
 }
 
-// SAFETY: as for `Ring`; the only write to a published slot is the producer's merge into the
-// newest slot, which the consumer reads only when it is also the oldest (checked in `find`).
+struct Stamps<const N: usize> {
+    ends: [u32; N],
+    ticks: [u64; N],
+    head: u32,
+    tail: u32,
+}
+
+// SAFETY: see the type's documentation: every access is exclusive (interrupt context, or the
+// main loop with interrupts masked).
 unsafe impl<const N: usize> Sync for StampRing<N> {}
 
 impl<const N: usize> StampRing<N> {
@@ -112,59 +118,56 @@ impl<const N: usize> StampRing<N> {
     /// Empty.
     pub const fn new() -> Self {
         StampRing {
-            ends: UnsafeCell::new([0; N]),
-            ticks: UnsafeCell::new([0; N]),
-            head: AtomicU32::new(0),
-            tail: AtomicU32::new(0),
+            inner: UnsafeCell::new(Stamps {
+                ends: [0; N],
+                ticks: [0; N],
+                head: 0,
+                tail: 0,
+            }),
             merged: AtomicU32::new(0),
         }
     }
 
-    /// Producer (interrupt): bytes `..end` were received by `ticks`. A full ring merges into the
-    /// newest stamp (those bytes get the later time; counted).
+    /// Producer (receive interrupt only): bytes `..end` were received by `ticks`. A full ring
+    /// gives up its oldest stamp (its bytes then carry the next one's, later, time; counted):
+    /// the newest stamps, where frames end, stay exact.
     #[inline(always)]
     pub fn push(&self, end: u32, ticks: u64) {
-        let head = self.head.load(Ordering::Relaxed);
-        let used = head.wrapping_sub(self.tail.load(Ordering::Acquire));
-        let (slot, publish) = if (used as usize) < N {
-            (head, true)
-        } else {
+        // SAFETY: interrupt context; the main loop touches the ring only with interrupts masked.
+        let s = unsafe { &mut *self.inner.get() };
+        if s.head.wrapping_sub(s.tail) as usize >= N {
+            s.tail = s.tail.wrapping_add(1);
             self.merged.fetch_add(1, Ordering::Relaxed);
-            (head.wrapping_sub(1), false)
-        };
-        let i = (slot & Self::MASK) as usize;
-        // SAFETY: see the Sync impl.
-        unsafe {
-            (*self.ends.get())[i] = end;
-            (*self.ticks.get())[i] = ticks;
         }
-        if publish {
-            self.head.store(head.wrapping_add(1), Ordering::Release);
-        }
+        let i = (s.head & Self::MASK) as usize;
+        s.ends[i] = end;
+        s.ticks[i] = ticks;
+        s.head = s.head.wrapping_add(1);
     }
 
-    /// Consumer: the time of the interrupt that received byte `end - 1`; older stamps are
-    /// released. Called with non-decreasing `end`.
+    /// Consumer: the time of the interrupt that received byte `end - 1`, releasing the stamps of
+    /// earlier bytes. Called with non-decreasing `end`.
     pub fn find(&self, end: u32) -> Option<u64> {
-        loop {
-            let head = self.head.load(Ordering::Acquire);
-            let tail = self.tail.load(Ordering::Relaxed);
-            if head == tail {
-                return None;
+        cortex_m::interrupt::free(|_| {
+            // SAFETY: interrupts are masked: no producer runs.
+            let s = unsafe { &mut *self.inner.get() };
+            while s.head != s.tail {
+                let i = (s.tail & Self::MASK) as usize;
+                if (s.ends[i].wrapping_sub(end) as i32) >= 0 {
+                    return Some(s.ticks[i]);
+                }
+                s.tail = s.tail.wrapping_add(1);
             }
-            let i = (tail & Self::MASK) as usize;
-            let (e, t) = cortex_m::interrupt::free(|_| {
-                // SAFETY: published slot; read with interrupts off so a merge cannot tear it.
-                unsafe { ((*self.ends.get())[i], (*self.ticks.get())[i]) }
-            });
-            if (e.wrapping_sub(end) as i32) >= 0 {
-                return Some(t);
-            }
-            self.tail.store(tail.wrapping_add(1), Ordering::Release);
-        }
+            None
+        })
     }
 
-    /// Stamps merged because the ring was full.
+    /// Consumer: releases the stamps of bytes before `end` (no later frame can end there).
+    pub fn prune(&self, end: u32) {
+        let _ = self.find(end.wrapping_add(1));
+    }
+
+    /// Stamps given up because the ring was full.
     pub fn merged(&self) -> u32 {
         self.merged.load(Ordering::Relaxed)
     }
