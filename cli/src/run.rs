@@ -50,6 +50,10 @@ pub struct RunArgs {
     /// IMU baud rate.
     #[arg(long)]
     imu_baud: Option<u32>,
+    /// The sensor hub's link, serial:DEV or serial:DEV@BAUD (default 921600): radar and IMU
+    /// through the hub, on its clock (docs/hub-link.md). --radar-cfg gives the radar settings.
+    #[arg(long, value_name = "serial:DEV[@BAUD]", conflicts_with_all = ["session", "radar_data", "imu"])]
+    hub: Option<String>,
     /// Do not configure the sensors (replayed ports, or sensors already streaming).
     #[arg(long)]
     no_configure: bool,
@@ -137,9 +141,9 @@ pub fn run(a: RunArgs) -> Result<()> {
     let radar_data = a.radar_data.clone().or(file.radar.data.clone());
     let imu = a.imu.clone().or(file.imu.port.clone());
     let offline = a.session.is_some();
-    if !offline && radar_data.is_none() && imu.is_none() {
+    if !offline && radar_data.is_none() && imu.is_none() && a.hub.is_none() {
         return Err(
-            "give --session DIR, or --radar-data and/or --imu (or a --config naming them)".into(),
+            "give --session DIR, --hub serial:DEV, or --radar-data and/or --imu (or a --config naming them)".into(),
         );
     }
     cfg.imu_rate_output = a
@@ -199,6 +203,7 @@ pub fn run(a: RunArgs) -> Result<()> {
             imu_baud: a.imu_baud.or(file.imu.baud).unwrap_or(115_200),
             imu_wrap_day: file.imu.wrap.as_deref() == Some("day"),
             configure: !a.no_configure,
+            hub: a.hub.clone(),
         }),
     };
     let stop = Arc::new(AtomicBool::new(false));

@@ -26,6 +26,8 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+pub mod hub;
+
 /// Where sensor data comes from.
 #[derive(Debug, Clone)]
 pub enum Input {
@@ -59,6 +61,8 @@ pub struct Devices {
     pub imu_wrap_day: bool,
     /// Configure the sensors before streaming (upload the `.cfg`, put the IMU in measurement).
     pub configure: bool,
+    /// The sensor hub's link, `serial:DEV[@BAUD]`: both sensors on the hub's clock ([`hub`]).
+    pub hub: Option<String>,
 }
 
 /// Settings of a run.
@@ -265,11 +269,11 @@ impl Plan {
                 session = Some(s);
             }
             Input::Devices(d) => {
-                if d.radar_data.is_none() && d.imu.is_none() {
+                if d.radar_data.is_none() && d.imu.is_none() && d.hub.is_none() {
                     return Err(RunError::NoSensor);
                 }
-                cfg.sync.radar_enabled = d.radar_data.is_some();
-                cfg.sync.imu_enabled = d.imu.is_some();
+                cfg.sync.radar_enabled = d.radar_data.is_some() || d.hub.is_some();
+                cfg.sync.imu_enabled = d.imu.is_some() || d.hub.is_some();
                 cfg.sync.radar_baud = d.radar_baud;
                 cfg.sync.imu_baud = d.imu_baud;
                 if let Some(p) = &d.radar_cfg {
@@ -351,6 +355,15 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
     } else if let Input::Devices(d) = input {
         let (radar, imu) = open_devices(d)?;
         let backoff = Duration::from_secs_f64(cfg.reopen_backoff_s);
+        if let Some(spec) = &d.hub {
+            let wrap = if d.imu_wrap_day {
+                TimeWrap::Day
+            } else {
+                TimeWrap::Pow32
+            };
+            let decoding = plan.radar_decoding;
+            input_threads.push(hub::spawn(&sh, spec, decoding, wrap, backoff, &counters)?);
+        }
         if let Some((port, src)) = radar {
             input_threads.push(spawn_radar_reader(
                 &sh,
