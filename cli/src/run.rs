@@ -76,6 +76,13 @@ pub struct RunArgs {
     /// TUM outputs also get the predicted poses.
     #[arg(long)]
     tum_predicted: bool,
+    /// The rig is a ground vehicle: the Doppler filter holds the body frame's lateral and
+    /// vertical velocity at zero within 0.1 m/s (as `odometry --vehicle`).
+    #[arg(long)]
+    vehicle: bool,
+    /// Radar updates may correct heading (as `odometry --radar-heading`; docs/odometry.md).
+    #[arg(long)]
+    radar_heading: bool,
     /// Write the summary as JSON to this file.
     #[arg(long)]
     summary_json: Option<PathBuf>,
@@ -183,6 +190,10 @@ pub fn run(a: RunArgs) -> Result<()> {
             nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z)),
         )
     };
+    if a.vehicle {
+        cfg.classical.rio.nonholonomic_std = milliego_odometry::offline::GROUND_VEHICLE_STD;
+    }
+    cfg.classical.rio.radar_heading = a.radar_heading;
     if let Some(p) = &file.extrinsics.radar {
         cfg.classical.mounting.radar = place(p);
     }

@@ -456,6 +456,7 @@ impl Rio {
         if self.started && m.t <= self.nav.state().t {
             self.counters.late += u64::from(self.nav.state().t - m.t > 0.05);
             self.update(&m);
+            self.nonholonomic();
         } else {
             self.pending.push(Pending::Velocity(m));
         }
@@ -466,6 +467,7 @@ impl Rio {
     pub fn push_frame_without_velocity(&mut self, t: f64) {
         if self.started && t <= self.nav.state().t {
             self.bound_vertical(true);
+            self.nonholonomic();
         } else {
             self.pending.push(Pending::Frame(t));
         }

@@ -160,6 +160,19 @@ fn offline_run_reproduces_milliego_odometry_with_a_barometer() {
 }
 
 #[test]
+fn offline_run_reproduces_milliego_odometry_for_a_ground_vehicle() {
+    // The ground vehicle constraint in both: the same poses.
+    let mut sc = Scenario::new(Family::Outdoor, MotionKind::Vehicle, 2);
+    sc.duration_s = 8.0;
+    let (d, s) = session_of(&sc);
+    let cfg = OfflineConfig::default().ground_vehicle();
+    let r = run_offline(&s, &cfg).unwrap();
+    assert!(r.nonholonomic.0 > 50, "{:?}", r.nonholonomic);
+    runtime_equals_odometry_with(&d, &s, &OfflineConfig::default());
+    runtime_equals_odometry_with(&d, &s, &cfg);
+}
+
+#[test]
 fn offline_run_reproduces_milliego_odometry_with_untrusted_radar_stamps() {
     // A session whose radar scans were imported with their bag arrival times (zero header
     // stamps, no trigger): both the runtime and the offline runner estimate the radar time
@@ -196,12 +209,22 @@ fn runtime_equals_odometry(
     d: &tempfile::TempDir,
     s: &Session,
 ) -> milliego_runtime::pipeline::Summary {
+    runtime_equals_odometry_with(d, s, &OfflineConfig::default())
+}
+
+/// As [`runtime_equals_odometry`], with the filter settings of `offline` in both.
+fn runtime_equals_odometry_with(
+    d: &tempfile::TempDir,
+    s: &Session,
+    offline: &OfflineConfig,
+) -> milliego_runtime::pipeline::Summary {
     let out = d.path().join("run.tum");
-    let cfg = RunConfig {
+    let mut cfg = RunConfig {
         estimator: EstimatorKind::Doppler,
         outputs: vec![OutputSpec::Tum(out.clone())],
         ..RunConfig::default()
     };
+    cfg.classical.rio = offline.rio;
     let input = Input::Session {
         dir: d.path().to_path_buf(),
         realtime: false,
@@ -210,9 +233,7 @@ fn runtime_equals_odometry(
     assert_eq!(summary.dropped_total, 0, "sessions are fed without drops");
     let mut ours = read_tum(&out);
     // `milliego odometry` with its defaults (the Doppler step from the .cfg, as the runtime).
-    let theirs = run_offline(s, &OfflineConfig::default())
-        .unwrap()
-        .trajectory;
+    let theirs = run_offline(s, offline).unwrap().trajectory;
     // The runtime has no pose during the 1 s levelling window; every later pose is the same
     // (frames after the last IMU sample, which the offline runner leaves out, aside).
     let last = theirs.last().unwrap().t;
