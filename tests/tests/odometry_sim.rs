@@ -394,3 +394,42 @@ fn a_ground_vehicle_constraint_keeps_a_car_on_its_track() {
     );
     assert!(a_car < a_plain, "{a_car:.2} vs {a_plain:.2} m");
 }
+
+#[test]
+fn the_time_offset_uncertainty_is_consistent() {
+    // NEES of the estimated radar time offset over walks, a robot and a head-worn rig, with true
+    // and 40 ms late stamps: its reported deviation must cover its error (mean z^2 under the
+    // chi-square(12)/12 99% bound, 2.18).
+    let mut z2 = Vec::new();
+    for (motion, seed) in [
+        (MotionKind::Handheld, 1),
+        (MotionKind::Handheld, 2),
+        (MotionKind::Handheld, 4),
+        (MotionKind::Robot, 1),
+        (MotionKind::Headworn, 2),
+        (MotionKind::Handheld, 6),
+    ] {
+        let mut sc = Scenario::new(Family::Office, motion, seed);
+        sc.duration_s = 40.0;
+        let (_dir, s) = simulated(&sc);
+        for shift in [0.0, 0.04] {
+            let cfg = OfflineConfig {
+                radar_time_shift_s: shift,
+                time_offset: TimeOffsetMode::Estimate(0.05),
+                ..OfflineConfig::default()
+            };
+            let (o, sd, _) = run(&s, &cfg).unwrap().time_offset.expect("estimated");
+            let z = (o + shift) / sd;
+            println!(
+                "{motion:?} seed {seed}, stamps {:.0} ms late: {:.1} +- {:.1} ms (z {z:.2})",
+                shift * 1e3,
+                o * 1e3,
+                sd * 1e3
+            );
+            z2.push(z * z);
+        }
+    }
+    let nees = z2.iter().sum::<f64>() / z2.len() as f64;
+    println!("time offset NEES {nees:.2} over {} runs", z2.len());
+    assert!(nees < 2.18, "time offset NEES {nees:.2}");
+}
