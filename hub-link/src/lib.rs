@@ -24,17 +24,17 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
-pub mod cobs;
-mod crc;
+/// COBS framing, shared with the pose link (one implementation for both links).
+pub use pose_link::cobs;
 mod deframer;
 mod message;
 
-pub use crc::{crc32c, Crc32c};
 pub use deframer::{Deframer, DeframerCounters, Event, FrameError};
 pub use message::{
     encode_serial, message_len, serial_len_max, DecodeError, Header, Health, Kind, Message,
     PortHealth, CRC_LEN, HEADER_LEN, HEALTH_LEN, MAX_BODY, VERSION,
 };
+pub use pose_link::{crc32c, Crc32c};
 
 /// Deframer size that holds any version-1 frame (a body of [`MAX_BODY`] bytes) \[B\].
 pub const FRAME_MAX: usize = serial_len_max(MAX_BODY);

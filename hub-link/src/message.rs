@@ -1,7 +1,7 @@
 //! The version-1 message: a 16-byte header, a body, a CRC-32C (spec: `docs/hub-link.md`).
 
 use crate::cobs::StreamEncoder;
-use crate::crc::Crc32c;
+use crate::Crc32c;
 use core::fmt;
 
 /// Protocol version this crate writes and reads.

@@ -78,6 +78,62 @@ pub fn encode(src: &[u8], dst: &mut [u8]) -> Result<usize, CobsError> {
     Ok(out)
 }
 
+/// COBS encoder that takes one byte at a time and emits encoded bytes as soon as a block is
+/// complete (at most 254 bytes are held): no frame-sized buffer. The output equals [`encode`]'s
+/// for the same input; [`StreamEncoder::finish`] also writes the 0x00 delimiter.
+#[derive(Debug, Clone)]
+pub struct StreamEncoder {
+    block: [u8; 254],
+    n: usize,
+}
+
+impl Default for StreamEncoder {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl StreamEncoder {
+    /// An encoder at the start of a frame.
+    pub const fn new() -> Self {
+        StreamEncoder {
+            block: [0; 254],
+            n: 0,
+        }
+    }
+
+    fn flush(&mut self, code: u8, out: &mut impl FnMut(u8)) -> usize {
+        out(code);
+        for &b in &self.block[..self.n] {
+            out(b);
+        }
+        let w = self.n + 1;
+        self.n = 0;
+        w
+    }
+
+    /// Adds one byte; returns the bytes written to `out`.
+    #[inline]
+    pub fn push(&mut self, b: u8, out: &mut impl FnMut(u8)) -> usize {
+        if b == 0 {
+            return self.flush(self.n as u8 + 1, out);
+        }
+        self.block[self.n] = b;
+        self.n += 1;
+        if self.n == 254 {
+            return self.flush(0xFF, out);
+        }
+        0
+    }
+
+    /// Ends the frame: the last block and the 0x00 delimiter; returns the bytes written.
+    pub fn finish(&mut self, out: &mut impl FnMut(u8)) -> usize {
+        let w = self.flush(self.n as u8 + 1, out);
+        out(0);
+        w + 1
+    }
+}
+
 /// Decodes one frame `src` (without its delimiter) into `dst`; returns the decoded length.
 pub fn decode(src: &[u8], dst: &mut [u8]) -> Result<usize, CobsError> {
     let mut i = 0;
@@ -145,6 +201,35 @@ mod tests {
         let mut mixed = long;
         mixed[300] = 0;
         round(&mixed);
+    }
+
+    #[test]
+    fn stream_encoder_matches_encode() {
+        let long: [u8; 800] =
+            core::array::from_fn(|i| if i % 97 == 5 { 0 } else { (i % 255) as u8 + 1 });
+        for n in [0, 1, 2, 253, 254, 255, 507, 508, 509, 800] {
+            for src in [&long[..n], &[0u8; 800][..n]] {
+                let mut want = [0u8; 1024];
+                let m = encode(src, &mut want).unwrap();
+                let mut got = [0u8; 1024];
+                let mut k = 0;
+                let mut e = StreamEncoder::new();
+                let mut w = 0;
+                for &b in src {
+                    w += e.push(b, &mut |x| {
+                        got[k] = x;
+                        k += 1
+                    });
+                }
+                w += e.finish(&mut |x| {
+                    got[k] = x;
+                    k += 1
+                });
+                assert_eq!(w, k);
+                assert_eq!(&got[..k - 1], &want[..m], "n = {n}");
+                assert_eq!(got[k - 1], 0);
+            }
+        }
     }
 
     #[test]

@@ -35,6 +35,6 @@ mod crc;
 mod deframer;
 mod message;
 
-pub use crc::crc32c;
+pub use crc::{crc32c, Crc32c};
 pub use deframer::{encode_serial, Deframer, DeframerCounters, Event, FrameError};
 pub use message::{DecodeError, Estimator, Health, PoseMessage, MESSAGE_LEN, MSG_POSE, VERSION};
