@@ -472,6 +472,26 @@ pub unsafe extern "C" fn pose_link_encode(
     cap: usize,
     written: *mut usize,
 ) -> PoseLinkStatus {
+    // SAFETY: the caller's contract, passed on.
+    unsafe {
+        encode_with(pose, out, cap, written, |m, buf| {
+            m.encode(buf).map_err(Into::into)
+        })
+    }
+}
+
+/// The encoders' common part: reads `*pose`, encodes it with `encode` into `out` (`cap` bytes)
+/// and writes the length to `*written` unless it is null.
+///
+/// # Safety
+/// As `pose_link_encode`.
+unsafe fn encode_with(
+    pose: *const PoseLinkPose,
+    out: *mut u8,
+    cap: usize,
+    written: *mut usize,
+    encode: impl FnOnce(&PoseMessage, &mut [u8]) -> Result<usize, PoseLinkStatus>,
+) -> PoseLinkStatus {
     if pose.is_null() {
         return PoseLinkStatus::NullPointer;
     }
@@ -483,13 +503,13 @@ pub unsafe extern "C" fn pose_link_encode(
         Ok(b) => b,
         Err(e) => return e,
     };
-    match m.encode(buf) {
+    match encode(&m, buf) {
         Ok(n) => {
             // SAFETY: `written` is null or writable (contract).
             unsafe { put(written, n) };
             PoseLinkStatus::Ok
         }
-        Err(e) => e.into(),
+        Err(e) => e,
     }
 }
 
@@ -506,23 +526,11 @@ pub unsafe extern "C" fn pose_link_encode_serial(
     cap: usize,
     written: *mut usize,
 ) -> PoseLinkStatus {
-    if pose.is_null() {
-        return PoseLinkStatus::NullPointer;
-    }
-    // SAFETY: as in `pose_link_encode`.
-    let m: PoseMessage = unsafe { pose.read_unaligned() }.into();
-    // SAFETY: the caller's contract on `out`/`cap`.
-    let buf = match unsafe { output(out, cap) } {
-        Ok(b) => b,
-        Err(e) => return e,
-    };
-    match encode_serial(&m, buf) {
-        Ok(n) => {
-            // SAFETY: `written` is null or writable (contract).
-            unsafe { put(written, n) };
-            PoseLinkStatus::Ok
-        }
-        Err(_) => PoseLinkStatus::BufferTooSmall,
+    // SAFETY: the caller's contract, passed on.
+    unsafe {
+        encode_with(pose, out, cap, written, |m, buf| {
+            encode_serial(m, buf).map_err(|_| PoseLinkStatus::BufferTooSmall)
+        })
     }
 }
 
