@@ -1,8 +1,9 @@
-//! `milliego record`: configures the radar and the IMU, then records their data ports into a
-//! session until Ctrl-C or a duration, with a progress line on stderr.
+//! `milliego record`: configures the radar and the IMU, then records their data ports (or both
+//! through the sensor hub's link) into a session until Ctrl-C or a duration, with a progress line
+//! on stderr.
 
 use clap::Args;
-use milliego_hil::{ImuPort, Live, RadarPorts, RecordConfig};
+use milliego_hil::{HubPort, ImuPort, Live, RadarPorts, RecordConfig};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -29,6 +30,11 @@ pub struct RecordArgs {
     /// IMU port.
     #[arg(long)]
     imu: Option<String>,
+    /// Both sensors through the sensor hub, serial:DEV or serial:DEV@BAUD (default 921600):
+    /// each frame timed by the hub's clock at its last byte (docs/hub-link.md). --radar-cfg is
+    /// saved (and uploaded over --radar-cli unless --no-config); the IMU is not configured.
+    #[arg(long, value_name = "serial:DEV[@BAUD]", conflicts_with_all = ["radar_data", "imu"])]
+    hub: Option<String>,
     /// IMU port rate, in bit/s.
     #[arg(long, default_value_t = 115_200)]
     imu_baud: u32,
@@ -47,8 +53,8 @@ pub struct RecordArgs {
 }
 
 pub fn run(a: RecordArgs) -> Result<(), Box<dyn std::error::Error>> {
-    if a.radar_data.is_none() && a.imu.is_none() {
-        return Err("nothing to record: give --radar-data and/or --imu".into());
+    if a.radar_data.is_none() && a.imu.is_none() && a.hub.is_none() {
+        return Err("nothing to record: give --radar-data and/or --imu, or --hub".into());
     }
     let cfg_text = match &a.radar_cfg {
         Some(p) => Some(std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?),
@@ -72,8 +78,21 @@ pub fn run(a: RecordArgs) -> Result<(), Box<dyn std::error::Error>> {
             }
             None => None,
         };
+    let hub = match &a.hub {
+        Some(spec) => {
+            let (path, baud) = milliego_runtime::pipeline::hub::parse_spec(spec)?;
+            Some(HubPort {
+                path,
+                baud,
+                radar_cli: a.radar_cli.clone(),
+                radar_cfg: cfg_text.clone(),
+            })
+        }
+        None => None,
+    };
     let cfg = RecordConfig {
         out: a.out,
+        hub,
         radar: a.radar_data.map(|data| RadarPorts {
             data,
             data_baud: a.radar_baud,
@@ -113,6 +132,20 @@ pub fn run(a: RecordArgs) -> Result<(), Box<dyn std::error::Error>> {
             s.bytes_skipped,
             s.queue_full,
             s.max_wait_ns as f64 * 1e-6
+        );
+    }
+    if let Some(h) = &report.hub {
+        let health = h.health.map_or("no health message".to_string(), |x| {
+            format!(
+                "hub says: radar {} B received, {} frames forwarded, {} rejected, {} B skipped, {} B ring overflow; IMU {} B, {} forwarded, {} rejected, {} B skipped, {} B ring overflow; link {} sent, {} dropped",
+                x.radar.rx_bytes, x.radar.frames_forwarded, x.radar.frames_bad, x.radar.bytes_skipped, x.radar.ring_overflow,
+                x.imu.rx_bytes, x.imu.frames_forwarded, x.imu.frames_bad, x.imu.bytes_skipped, x.imu.ring_overflow,
+                x.link_sent, x.link_dropped
+            )
+        });
+        eprintln!(
+            "hub link ({}): {} B, {} messages, {} bad frames ({} B dropped), {} missing by sequence, {} restarts, {} stamps clamped; {health}",
+            h.port, h.link_bytes, h.messages, h.bad_frames, h.bytes_dropped, h.seq_gaps, h.restarts, h.stamps_clamped
         );
     }
     Ok(())

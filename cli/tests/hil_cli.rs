@@ -186,4 +186,24 @@ fn bad_options_name_themselves() {
         !out.status.success() && e.contains("nothing to record"),
         "{e}"
     );
+    // Through the hub: its spec, its exclusivity with the sensor ports, a missing device.
+    let r = dir.path().join("h");
+    for (args, what) in [
+        (vec!["--hub", "/dev/ttyACM0", "--no-config"], "serial:DEV"),
+        (vec!["--hub", "serial:/dev/x@fast", "--no-config"], "fast"),
+        (vec!["--hub", "serial:/dev/x", "--imu", "/dev/y"], "--imu"),
+        (
+            vec!["--hub", "serial:/nonexistent/hub", "--no-config"],
+            "/nonexistent/hub",
+        ),
+        (vec!["--hub", "serial:/nonexistent/hub"], "--radar-cli"),
+    ] {
+        let out = Command::new(BIN)
+            .args(["record", "-o", r.to_str().unwrap()])
+            .args(&args)
+            .output()
+            .unwrap();
+        let e = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && e.contains(what), "{args:?}: {e}");
+    }
 }

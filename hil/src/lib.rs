@@ -6,8 +6,9 @@
 //! * [`fault`]: seeded, counted fault injection (corrupt, drop, garbage bursts, stalls, reopens).
 //! * [`sink`]: where a replay writes: pseudo-terminals it creates, or real serial devices.
 //! * [`mod@replay`]: plays a session's streams into sinks, radar and IMU on one time line.
-//! * [`mod@record`]: reads the radar and IMU data ports on their own threads into a session, losing
-//!   nothing (bytes read == bytes written is checked at exit).
+//! * [`mod@record`]: reads the radar and IMU data ports on their own threads (or both through the
+//!   sensor hub's link, on its clock) into a session, losing nothing (bytes read == bytes written
+//!   is checked at exit).
 //!
 //! Spec of the rig and its CLI: `docs/hil.md`; of the session format: `docs/session.md`.
 
@@ -21,7 +22,9 @@ pub mod schedule;
 pub mod sink;
 
 pub use fault::{FaultCounts, FaultEvent, FaultKind, FaultPlan, Garbage, PortFault};
-pub use record::{record, ImuPort, Live, RadarPorts, RecordConfig, RecordReport, StreamRecord};
+pub use record::{
+    record, HubPort, HubRecord, ImuPort, Live, RadarPorts, RecordConfig, RecordReport, StreamRecord,
+};
 pub use replay::{replay, Notice, Pacing, ReplayOptions, ReplayReport, StreamReport};
 pub use schedule::{Piece, StreamSchedule, Timing};
 pub use sink::Sink;

@@ -7,6 +7,11 @@
 //!                                                       live)
 //! ```
 //!
+//! Through the sensor hub (`RecordConfig::hub`, docs/hub-link.md) one port carries both sensors:
+//! each forwarded radar frame and IMU message becomes one chunk of its stream, timed by the hub's
+//! clock at the frame's last byte (one clock for both sensors, mapped onto session time by one
+//! offset, fixed at the first message), and the link's damage is counted ([`HubRecord`]).
+//!
 //! Each read is stamped with the host time since the session start, on one monotonic anchor
 //! shared by both readers, and written unchanged with [`StreamWriter::write_chunk`]. A full channel
 //! blocks its reader (counted as a queue-full event) for at most [`RecordConfig::max_block`]; past
@@ -15,6 +20,7 @@
 
 use crate::{HilError, StreamKind};
 use crossbeam_channel::{bounded, RecvTimeoutError, SendTimeoutError, Sender, TrySendError};
+use hub_link::{Deframer, Event, Message, FRAME_MAX};
 use imu_driver::host::{Device, Plan};
 use imu_driver::{DataId, LogFramer, OutputSetting};
 use milliego_session::{Meta, SessionWriter, Source, StreamWriter};
@@ -52,6 +58,20 @@ pub struct ImuPort {
     pub rate_hz: u16,
 }
 
+/// The sensor hub's link port: radar frames and IMU messages, verbatim, with the hub's timestamps.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HubPort {
+    /// Device.
+    pub path: String,
+    /// Baud rate \[bit/s\].
+    pub baud: u32,
+    /// Radar CLI port: the hub forwards the radar's data port only, so the .cfg upload and
+    /// sensorStop go to the radar directly.
+    pub radar_cli: Option<String>,
+    /// The radar's .cfg (saved as the session's `radar.cfg`; uploaded when configuring).
+    pub radar_cfg: Option<String>,
+}
+
 /// What to record.
 #[derive(Debug, Clone)]
 pub struct RecordConfig {
@@ -61,6 +81,9 @@ pub struct RecordConfig {
     pub radar: Option<RadarPorts>,
     /// The IMU, if recorded.
     pub imu: Option<ImuPort>,
+    /// Both sensors through the sensor hub instead (excludes `radar` and `imu`). The IMU cannot
+    /// be configured through the hub; configuring uploads the radar's .cfg over its CLI port.
+    pub hub: Option<HubPort>,
     /// Configure the sensors first (radar .cfg upload, IMU output configuration); at the end
     /// sensorStop / GoToConfig.
     pub configure: bool,
@@ -84,6 +107,7 @@ impl Default for RecordConfig {
             out: PathBuf::from("session"),
             radar: None,
             imu: None,
+            hub: None,
             configure: true,
             duration: None,
             queue_chunks: 1024,
@@ -160,6 +184,30 @@ pub struct StreamRecord {
     pub bytes_skipped: u64,
 }
 
+/// What came over the hub's link.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct HubRecord {
+    /// The link port.
+    pub port: String,
+    /// Bytes read from the link \[B\].
+    pub link_bytes: u64,
+    /// Messages decoded (radar, IMU, health).
+    pub messages: u64,
+    /// Link frames that failed COBS, CRC or message checks (their bytes are in `bytes_dropped`).
+    pub bad_frames: u64,
+    /// Bytes of those frames and of partial ones \[B\].
+    pub bytes_dropped: u64,
+    /// Messages missing by the link's sequence numbers (dropped by the hub for backpressure, or
+    /// destroyed on the way).
+    pub seq_gaps: u64,
+    /// Times the hub restarted (sequence back to 0); each re-anchors its clock.
+    pub restarts: u64,
+    /// Frames whose hub time went back within a stream (written at the previous time).
+    pub stamps_clamped: u64,
+    /// The hub's last health message (its own counters: UART bytes, framer rejects, drops).
+    pub health: Option<hub_link::Health>,
+}
+
 /// What a recording did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RecordReport {
@@ -171,6 +219,8 @@ pub struct RecordReport {
     pub seconds: f64,
     /// Shutdown steps that failed (sensorStop, GoToConfig): reported, not fatal.
     pub warnings: Vec<String>,
+    /// The hub's link, when recorded through the hub.
+    pub hub: Option<HubRecord>,
 }
 
 enum Msg {
@@ -184,15 +234,22 @@ enum Msg {
 struct ReaderEnd<P> {
     port: P,
     error: Option<HilError>,
+    hub: Option<HubRecord>,
 }
 
 /// Configures the sensors (unless told not to), records until the duration, a stop request or a
 /// port error, shuts the sensors down, and writes the session. The session is written even when a
 /// port fails (with what was read until then), and the error is returned after that.
 pub fn record(cfg: &RecordConfig, live: &Arc<Live>) -> Result<RecordReport, HilError> {
-    if cfg.radar.is_none() && cfg.imu.is_none() {
+    if cfg.radar.is_none() && cfg.imu.is_none() && cfg.hub.is_none() {
         return Err(HilError::Invalid(
-            "nothing to record: give the radar data port and/or the IMU port".into(),
+            "nothing to record: give the radar data port and/or the IMU port, or the hub's".into(),
+        ));
+    }
+    if cfg.hub.is_some() && (cfg.radar.is_some() || cfg.imu.is_some()) {
+        return Err(HilError::Invalid(
+            "the hub's link carries both sensors: give it or the sensors' own data ports, not both"
+                .into(),
         ));
     }
     if cfg.configure {
@@ -204,9 +261,37 @@ pub fn record(cfg: &RecordConfig, live: &Arc<Live>) -> Result<RecordReport, HilE
                 ));
             }
         }
+        if let Some(h) = &cfg.hub {
+            if h.radar_cli.is_none() || h.radar_cfg.is_none() {
+                return Err(HilError::Invalid(
+                    "configuring the radar behind the hub needs --radar-cli and --radar-cfg (the hub forwards its data port only; the IMU cannot be configured through the hub); or use --no-config"
+                        .into(),
+                ));
+            }
+        }
     }
     let mut writer = SessionWriter::create(&cfg.out, Meta::new(Source::Recorded))?;
     let mut warnings = Vec::new();
+    if let Some(h) = &cfg.hub {
+        if let Some(text) = &h.radar_cfg {
+            writer.radar_cfg(text)?;
+        }
+        let port = format!("hub {}", h.path);
+        writer
+            .meta_mut()
+            .radar
+            .get_or_insert_with(Default::default)
+            .port = Some(port.clone());
+        writer
+            .meta_mut()
+            .imu
+            .get_or_insert_with(Default::default)
+            .port = Some(port);
+        writer.meta_mut().description = format!(
+            "recorded through the sensor hub on {}: each index record is one frame, timed by the hub's clock at its last byte (docs/hub-link.md)",
+            h.path
+        );
+    }
     if let Some(r) = &cfg.radar {
         if let Some(text) = &r.cfg {
             writer.radar_cfg(text)?;
@@ -232,10 +317,10 @@ pub fn record(cfg: &RecordConfig, live: &Arc<Live>) -> Result<RecordReport, HilE
     let halt = Arc::new(AtomicBool::new(false));
     let failed = Arc::new(AtomicBool::new(false));
     let mut files = Vec::new();
-    if cfg.radar.is_some() {
+    if cfg.radar.is_some() || cfg.hub.is_some() {
         files.push((StreamKind::Radar, writer.stream(StreamKind::Radar)?));
     }
-    if cfg.imu.is_some() {
+    if cfg.imu.is_some() || cfg.hub.is_some() {
         files.push((StreamKind::Imu, writer.stream(StreamKind::Imu)?));
     }
     let wlive = live.clone();
@@ -259,6 +344,18 @@ pub fn record(cfg: &RecordConfig, live: &Arc<Live>) -> Result<RecordReport, HilE
     let mut readers = Vec::new();
     let mut cli = None;
     let setup = (|| -> Result<(), HilError> {
+        if let Some(h) = &cfg.hub {
+            let port = open(StreamKind::Radar, &h.path, h.baud, cfg.read_timeout)?;
+            let (tx, live, halt, failed) = (tx.clone(), live.clone(), halt.clone(), failed.clone());
+            let (path, max_block) = (h.path.clone(), cfg.max_block);
+            let t = thread::Builder::new()
+                .name("record-hub".into())
+                .spawn(move || {
+                    hub_read_loop(path, port, tx, &live, &halt, &failed, anchor, max_block)
+                })
+                .map_err(|e| HilError::Invalid(format!("cannot start the hub reader: {e}")))?;
+            readers.push((StreamKind::Radar, t));
+        }
         if let Some(r) = &cfg.radar {
             let port = open(StreamKind::Radar, &r.data, r.data_baud, cfg.read_timeout)?;
             readers.push((
@@ -288,10 +385,12 @@ pub fn record(cfg: &RecordConfig, live: &Arc<Live>) -> Result<RecordReport, HilE
                 spawn(StreamKind::Imu, m.path.clone(), port)?,
             ));
         }
-        if let (true, Some(r)) = (cfg.configure, &cfg.radar) {
-            let (Some(cli_path), Some(text)) = (&r.cli, &r.cfg) else {
-                return Ok(());
-            };
+        let radar_cli = match (&cfg.radar, &cfg.hub) {
+            (Some(r), _) => r.cli.as_ref().zip(r.cfg.as_ref()),
+            (None, Some(h)) => h.radar_cli.as_ref().zip(h.radar_cfg.as_ref()),
+            (None, None) => None,
+        };
+        if let (true, Some((cli_path, text))) = (cfg.configure, radar_cli) {
             let port = open(
                 StreamKind::Radar,
                 cli_path,
@@ -323,12 +422,14 @@ pub fn record(cfg: &RecordConfig, live: &Arc<Live>) -> Result<RecordReport, HilE
 
     let mut first_err = None;
     let mut ends = Vec::new();
+    let mut hub = None;
     for (kind, h) in readers {
         match h.join() {
             Ok(mut end) => {
                 if let Some(e) = end.error.take() {
                     first_err.get_or_insert(e);
                 }
+                hub = hub.or(end.hub.take());
                 ends.push((kind, end));
             }
             Err(_) => {
@@ -380,9 +481,10 @@ pub fn record(cfg: &RecordConfig, live: &Arc<Live>) -> Result<RecordReport, HilE
         }
         out.push(StreamRecord {
             stream: kind,
-            port: match kind {
-                StreamKind::Radar => cfg.radar.as_ref().map(|r| r.data.clone()),
-                StreamKind::Imu => cfg.imu.as_ref().map(|m| m.path.clone()),
+            port: match (kind, &cfg.hub) {
+                (_, Some(h)) => Some(format!("hub {}", h.path)),
+                (StreamKind::Radar, None) => cfg.radar.as_ref().map(|r| r.data.clone()),
+                (StreamKind::Imu, None) => cfg.imu.as_ref().map(|m| m.path.clone()),
             }
             .unwrap_or_default(),
             bytes_read,
@@ -400,6 +502,7 @@ pub fn record(cfg: &RecordConfig, live: &Arc<Live>) -> Result<RecordReport, HilE
         streams: out,
         seconds,
         warnings,
+        hub,
     })
 }
 
@@ -492,49 +595,169 @@ fn read_loop<P: io::Read>(
             host_ns,
             bytes: buf[..n].to_vec(),
         };
-        match tx.try_send(msg) {
-            Ok(()) => {}
-            Err(TrySendError::Full(msg)) => {
-                l.queue_full.fetch_add(1, Ordering::Relaxed);
-                let t = Instant::now();
-                let r = tx.send_timeout(msg, max_block);
-                let waited = u64::try_from(t.elapsed().as_nanos()).unwrap_or(u64::MAX);
-                l.max_wait_ns.fetch_max(waited, Ordering::Relaxed);
-                match r {
-                    Ok(()) => {}
-                    Err(SendTimeoutError::Timeout(_)) => {
-                        error = fail(
-                            "queue (the writer fell behind)",
-                            io::Error::new(
-                                io::ErrorKind::TimedOut,
-                                format!(
-                                    "the queue to the writer stayed full for {max_block:?}; {n} B read but not written"
-                                ),
-                            ),
-                        );
-                        break;
-                    }
-                    Err(SendTimeoutError::Disconnected(_)) => {
-                        error = fail(
-                            "queue",
-                            io::Error::other(format!(
-                                "the writer stopped; {n} B read but not written"
-                            )),
-                        );
-                        break;
-                    }
-                }
+        if let Err((action, source)) = send(&tx, msg, l, max_block, n) {
+            error = fail(action, source);
+            break;
+        }
+    }
+    ReaderEnd {
+        port,
+        error,
+        hub: None,
+    }
+}
+
+/// Hands a chunk to the writer: at once, or after waiting at most `max_block` on a full queue
+/// (counted); past that, or with the writer gone, the failure to report (`n` bytes unwritten).
+fn send(
+    tx: &Sender<Msg>,
+    msg: Msg,
+    l: &LiveStream,
+    max_block: Duration,
+    n: usize,
+) -> Result<(), (&'static str, io::Error)> {
+    let gone = || {
+        (
+            "queue",
+            io::Error::other(format!("the writer stopped; {n} B read but not written")),
+        )
+    };
+    match tx.try_send(msg) {
+        Ok(()) => Ok(()),
+        Err(TrySendError::Full(msg)) => {
+            l.queue_full.fetch_add(1, Ordering::Relaxed);
+            let t = Instant::now();
+            let r = tx.send_timeout(msg, max_block);
+            let waited = u64::try_from(t.elapsed().as_nanos()).unwrap_or(u64::MAX);
+            l.max_wait_ns.fetch_max(waited, Ordering::Relaxed);
+            match r {
+                Ok(()) => Ok(()),
+                Err(SendTimeoutError::Timeout(_)) => Err((
+                    "queue (the writer fell behind)",
+                    io::Error::new(
+                        io::ErrorKind::TimedOut,
+                        format!(
+                            "the queue to the writer stayed full for {max_block:?}; {n} B read but not written"
+                        ),
+                    ),
+                )),
+                Err(SendTimeoutError::Disconnected(_)) => Err(gone()),
             }
-            Err(TrySendError::Disconnected(_)) => {
+        }
+        Err(TrySendError::Disconnected(_)) => Err(gone()),
+    }
+}
+
+/// The hub's link port -> one chunk per forwarded frame, on the hub's clock.
+#[allow(clippy::too_many_arguments)]
+fn hub_read_loop<P: io::Read>(
+    path: String,
+    mut port: P,
+    tx: Sender<Msg>,
+    live: &Live,
+    stop: &AtomicBool,
+    failed: &AtomicBool,
+    anchor: Instant,
+    max_block: Duration,
+) -> ReaderEnd<P> {
+    let mut buf = vec![0u8; 1 << 16];
+    let mut deframer: Box<Deframer<FRAME_MAX>> = Box::default();
+    let mut rec = HubRecord {
+        port: path.clone(),
+        ..HubRecord::default()
+    };
+    // (hub time, session time) of the anchor message [ns]; the last time written per stream.
+    let mut clock: Option<(u64, u64)> = None;
+    let mut next_seq: Option<u32> = None;
+    let mut last = [0u64; 2];
+    let fail = |action: &'static str, source: io::Error| {
+        failed.store(true, Ordering::SeqCst);
+        Some(HilError::Port {
+            stream: StreamKind::Radar,
+            path: format!("{path} (hub link)"),
+            action,
+            source,
+        })
+    };
+    let mut error = None;
+    'read: while !stop.load(Ordering::Relaxed) {
+        let n = match port.read(&mut buf) {
+            Ok(0) => {
                 error = fail(
-                    "queue",
-                    io::Error::other(format!("the writer stopped; {n} B read but not written")),
+                    "read",
+                    io::Error::new(
+                        io::ErrorKind::UnexpectedEof,
+                        "the port reported end of file (hub gone?)",
+                    ),
                 );
                 break;
             }
+            Ok(n) => n,
+            Err(e) if crate::is_transient(&e) => continue,
+            Err(e) => {
+                let hint = format!("{e} (hub unplugged, or the other end closed?)");
+                error = fail("read", io::Error::new(e.kind(), hint));
+                break;
+            }
+        };
+        let host_ns = u64::try_from(anchor.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        rec.link_bytes += n as u64;
+        let mut input = &buf[..n];
+        loop {
+            let m = match deframer.poll(&mut input) {
+                Event::Message(m) => m,
+                Event::BadFrame(_) => continue,
+                Event::NeedMore => break,
+            };
+            let h = *m.header();
+            if let Some(want) = next_seq {
+                if h.seq == 0 && want != 0 {
+                    rec.restarts += 1;
+                    clock = None;
+                } else if h.seq != want {
+                    rec.seq_gaps += u64::from(h.seq.wrapping_sub(want));
+                }
+            }
+            next_seq = Some(h.seq.wrapping_add(1));
+            let (t0, s0) = *clock.get_or_insert((h.t_ns, host_ns));
+            let at = (i128::from(s0) + i128::from(h.t_ns) - i128::from(t0)).max(0);
+            let at = u64::try_from(at).unwrap_or(u64::MAX);
+            let (kind, bytes) = match m {
+                Message::Radar { bytes, .. } => (StreamKind::Radar, bytes),
+                Message::Imu { bytes, .. } => (StreamKind::Imu, bytes),
+                Message::Health { health, .. } => {
+                    rec.health = Some(health);
+                    continue;
+                }
+            };
+            let i = usize::from(kind == StreamKind::Imu);
+            if at < last[i] {
+                rec.stamps_clamped += 1;
+            }
+            last[i] = last[i].max(at);
+            let l = live.stream(kind);
+            l.bytes_read.fetch_add(bytes.len() as u64, Ordering::SeqCst);
+            l.chunks.fetch_add(1, Ordering::Relaxed);
+            let msg = Msg::Chunk {
+                kind,
+                host_ns: last[i],
+                bytes: bytes.to_vec(),
+            };
+            if let Err((action, source)) = send(&tx, msg, l, max_block, bytes.len()) {
+                error = fail(action, source);
+                break 'read;
+            }
         }
     }
-    ReaderEnd { port, error }
+    let c = deframer.counters();
+    rec.messages = c.messages_ok;
+    rec.bad_frames = c.frames_bad_cobs + c.frames_bad_message + c.frames_overflow;
+    rec.bytes_dropped = c.bytes_dropped;
+    ReaderEnd {
+        port,
+        error,
+        hub: Some(rec),
+    }
 }
 
 /// Per-stream decoder for the live counters.
