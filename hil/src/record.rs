@@ -20,7 +20,7 @@
 
 use crate::{HilError, StreamKind};
 use crossbeam_channel::{bounded, RecvTimeoutError, SendTimeoutError, Sender, TrySendError};
-use hub_link::{Deframer, Event, Message, FRAME_MAX};
+use hub_link::{Deframer, Event, LinkClock, Message, FRAME_MAX};
 use imu_driver::host::{Device, Plan};
 use imu_driver::{DataId, LogFramer, OutputSetting};
 use milliego_session::{Meta, SessionWriter, Source, StreamWriter};
@@ -666,9 +666,8 @@ fn hub_read_loop<P: io::Read>(
         port: path.clone(),
         ..HubRecord::default()
     };
-    // (hub time, session time) of the anchor message [ns]; the last time written per stream.
-    let mut clock: Option<(u64, u64)> = None;
-    let mut next_seq: Option<u32> = None;
+    // The hub's clock on session time; the last time written per stream [ns].
+    let mut clock = LinkClock::default();
     let mut last = [0u64; 2];
     let fail = |action: &'static str, source: io::Error| {
         failed.store(true, Ordering::SeqCst);
@@ -709,19 +708,7 @@ fn hub_read_loop<P: io::Read>(
                 Event::BadFrame(_) => continue,
                 Event::NeedMore => break,
             };
-            let h = *m.header();
-            if let Some(want) = next_seq {
-                if h.seq == 0 && want != 0 {
-                    rec.restarts += 1;
-                    clock = None;
-                } else if h.seq != want {
-                    rec.seq_gaps += u64::from(h.seq.wrapping_sub(want));
-                }
-            }
-            next_seq = Some(h.seq.wrapping_add(1));
-            let (t0, s0) = *clock.get_or_insert((h.t_ns, host_ns));
-            let at = (i128::from(s0) + i128::from(h.t_ns) - i128::from(t0)).max(0);
-            let at = u64::try_from(at).unwrap_or(u64::MAX);
+            let at = clock.observe(m.header(), host_ns).t_ns;
             let (kind, bytes) = match m {
                 Message::Radar { bytes, .. } => (StreamKind::Radar, bytes),
                 Message::Imu { bytes, .. } => (StreamKind::Imu, bytes),
@@ -750,6 +737,8 @@ fn hub_read_loop<P: io::Read>(
         }
     }
     let c = deframer.counters();
+    rec.seq_gaps = clock.seq_gaps;
+    rec.restarts = clock.restarts;
     rec.messages = c.messages_ok;
     rec.bad_frames = c.frames_bad_cobs + c.frames_bad_message + c.frames_overflow;
     rec.bytes_dropped = c.bytes_dropped;

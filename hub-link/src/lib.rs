@@ -26,9 +26,11 @@
 
 /// COBS framing, shared with the pose link (one implementation for both links).
 pub use pose_link::cobs;
+mod clock;
 mod deframer;
 mod message;
 
+pub use clock::{LinkClock, Observed};
 pub use deframer::{Deframer, DeframerCounters, Event, FrameError};
 pub use message::{
     encode_serial, message_len, serial_len_max, DecodeError, Header, Health, Kind, Message,

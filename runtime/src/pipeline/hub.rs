@@ -4,16 +4,16 @@
 //! clock for both sensors) instead of the host time of the read.
 //!
 //! The hub clock is mapped onto the pipeline's host clock by one offset, fixed at the first
-//! message: `host_s = host_s(first read) + (t_hub - t_hub(first))`. It follows the hub's
-//! oscillator from there (no drift correction: tens of ppm, well inside the synchroniser's
-//! tolerances over a session). A restarted hub (link sequence back to 0 and hub time going back)
-//! re-anchors the offset.
+//! message: `host_s = host_s(first read) + (t_hub - t_hub(first))` ([`hub_link::LinkClock`], as
+//! `record --hub` does). It follows the hub's oscillator from there (no drift correction: tens
+//! of ppm, well inside the synchroniser's tolerances over a session). A restarted hub (link
+//! sequence back to 0) re-anchors the offset.
 
 use super::{spawn_named, InputCounters, RunError, Shared};
 use crate::reader::{
     radar_sink, read_loop, ImuDecoder, ImuItem, RadarDecoder, RadarItem, SerialSource, Source,
 };
-use hub_link::{Deframer, DeframerCounters, Event, Health, Message, FRAME_MAX};
+use hub_link::{Deframer, DeframerCounters, Event, Health, LinkClock, Message, FRAME_MAX};
 use imu_driver::TimeWrap;
 use radar_driver::host::DecoderConfig;
 use std::sync::atomic::Ordering;
@@ -39,11 +39,8 @@ pub struct HubDecoder {
     deframer: Box<Deframer<FRAME_MAX>>,
     radar: RadarDecoder,
     imu: ImuDecoder,
-    /// (hub time \[ns\], host time \[s\]) of the anchor message.
-    anchor: Option<(u64, f64)>,
-    next_seq: Option<u32>,
-    /// Link messages missing (sequence gaps: dropped by the hub for backpressure, or corrupted).
-    pub seq_gaps: u64,
+    /// Sequence and clock of the link (missing messages, restarts, the hub-to-host offset).
+    clock: LinkClock,
     /// The hub's last health message.
     pub health: Option<Health>,
 }
@@ -51,7 +48,7 @@ pub struct HubDecoder {
 impl std::fmt::Debug for HubDecoder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("HubDecoder")
-            .field("seq_gaps", &self.seq_gaps)
+            .field("clock", &self.clock)
             .finish()
     }
 }
@@ -63,9 +60,7 @@ impl HubDecoder {
             deframer: Box::default(),
             radar: RadarDecoder::new(radar),
             imu: ImuDecoder::new(wrap),
-            anchor: None,
-            next_seq: None,
-            seq_gaps: 0,
+            clock: LinkClock::default(),
             health: None,
         }
     }
@@ -78,6 +73,12 @@ impl HubDecoder {
     /// The IMU decoder.
     pub fn imu(&self) -> &ImuDecoder {
         &self.imu
+    }
+
+    /// Link messages missing by sequence number (dropped by the hub for backpressure, or
+    /// corrupted on the way).
+    pub fn seq_gaps(&self) -> u64 {
+        self.clock.seq_gaps
     }
 
     /// The link's counters (bytes, messages, bad frames and their bytes).
@@ -104,19 +105,20 @@ impl HubDecoder {
                 }
                 Event::NeedMore => break,
             };
-            let h = *m.header();
-            if let Some(want) = self.next_seq {
-                if h.seq == 0 && want != 0 {
-                    tracing::warn!("hub link: the hub restarted (sequence 0); clock re-anchored");
-                    self.anchor = None;
-                } else if h.seq != want {
-                    self.seq_gaps += u64::from(h.seq.wrapping_sub(want));
-                    tracing::warn!(expected = want, got = h.seq, "hub link: messages missing");
-                }
+            // The hub clock on the host's, in ns (host_s is seconds since the run started).
+            let o = self
+                .clock
+                .observe(m.header(), (host_s.max(0.0) * 1e9).round() as u64);
+            if o.restarted {
+                tracing::warn!("hub link: the hub restarted (sequence 0); clock re-anchored");
+            } else if o.missing > 0 {
+                tracing::warn!(
+                    missing = o.missing,
+                    seq = m.header().seq,
+                    "hub link: messages missing"
+                );
             }
-            self.next_seq = Some(h.seq.wrapping_add(1));
-            let (t0, s0) = *self.anchor.get_or_insert((h.t_ns, host_s));
-            let t = s0 + (h.t_ns as f64 - t0 as f64) * 1e-9;
+            let t = o.t_ns as f64 * 1e-9;
             match m {
                 Message::Radar { bytes, .. } => self.radar.feed(bytes, t, read_ns, &mut *radar),
                 Message::Imu { bytes, .. } => self.imu.feed(bytes, t, read_ns, &mut *imu),
@@ -189,7 +191,7 @@ pub(super) fn spawn(
             dec[1].store(hub.imu().samples(), Ordering::Relaxed);
         });
         if let Some(h) = hub.health {
-            tracing::info!(?h, seq_gaps = hub.seq_gaps, "hub: last health");
+            tracing::info!(?h, seq_gaps = hub.seq_gaps(), "hub: last health");
         }
     })
 }
@@ -252,7 +254,7 @@ mod tests {
                 .map(|&(n, t)| (n, ((t - t0) * 1e3).round() as i64))
                 .collect();
             assert_eq!(rel, [(1, 0), (2, 50), (3, 100)], "chunks of {chunk}");
-            assert_eq!(hub.seq_gaps, 0);
+            assert_eq!(hub.seq_gaps(), 0);
         }
     }
 
@@ -334,7 +336,8 @@ mod tests {
             };
             feed(&mut hub, &mut radar_seen, &mut imu_seen, &wire, 1000.0);
             assert_eq!(
-                hub.seq_gaps, 2,
+                hub.seq_gaps(),
+                2,
                 "chunks of {chunk}: seq 2 corrupted, 4 lost"
             );
             let link = *hub.link();
@@ -362,7 +365,8 @@ mod tests {
                 "chunks of {chunk}: seq 0, 1, 3, 5, 6, 8"
             );
             assert_eq!(
-                hub.seq_gaps, 3,
+                hub.seq_gaps(),
+                3,
                 "chunks of {chunk}: and seq 7, cut by the reopen"
             );
 
