@@ -17,3 +17,4 @@ pub mod stage;
 pub mod stats;
 pub mod summary;
 pub mod sync;
+pub mod view;

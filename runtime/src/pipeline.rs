@@ -16,6 +16,7 @@ use crate::summary::{
     RunSummary, SyncSummary,
 };
 use crate::sync::{SyncConfig, SyncCounters, SyncOut, Synchroniser};
+use crate::view::{ViewEvent, ViewStatus, ViewTap};
 use imu_driver::TimeWrap;
 use milliego_session::streams::StreamReport;
 use pose_link::Health;
@@ -93,6 +94,11 @@ pub struct RunConfig {
     /// Sessions: align the clocks with the online synchroniser (from the recorded host
     /// stamps) instead of the whole-session fit.
     pub session_online_clock: bool,
+    /// A live view's hand-off ([`crate::view`]): copies of frames, samples and poses, offered
+    /// without waiting; what it cannot take is counted (`view_dropped`).
+    pub view: Option<ViewTap>,
+    /// Sessions at their original pace (`realtime`): how many times faster than recorded.
+    pub session_speed: f64,
 }
 
 impl Default for RunConfig {
@@ -110,6 +116,8 @@ impl Default for RunConfig {
             idle_exit_s: None,
             reopen_backoff_s: 0.05,
             session_online_clock: false,
+            view: None,
+            session_speed: 1.0,
         }
     }
 }
@@ -163,6 +171,8 @@ struct Shared {
     last_data_ns: AtomicU64,
     /// Sessions: common-clock time up to which the feeder has pushed everything (f64 bits).
     watermark: AtomicU64,
+    /// The live view's hand-off, when one is on.
+    view: Option<ViewTap>,
 }
 
 impl Shared {
@@ -342,14 +352,29 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         epoch: Instant::now(),
         last_data_ns: AtomicU64::new(0),
         watermark: AtomicU64::new(f64::NEG_INFINITY.to_bits()),
+        view: cfg.view.clone(),
     });
+    if let Some(v) = &sh.view {
+        v.offer(ViewEvent::Start {
+            mounting: cfg.classical.mounting,
+            estimator: cfg.estimator.name().into(),
+            input: if offline { "session" } else { "devices" }.into(),
+            clock: if offline && !cfg.session_online_clock {
+                "session fit"
+            } else {
+                "online"
+            }
+            .into(),
+        });
+    }
     let counters = InputCounters::default();
     // The radar plausibility verdicts: the session decoder's report, or the live reader's counters.
     let mut session_radar_report = None;
     let mut input_threads = Vec::new();
     if let Some(s) = plan.session {
         let realtime = matches!(input, Input::Session { realtime: true, .. });
-        let (t, report) = start_session(&sh, &s, realtime, cfg.session_online_clock, &counters)?;
+        let pace = realtime.then_some(cfg.session_speed);
+        let (t, report) = start_session(&sh, &s, pace, cfg.session_online_clock, &counters)?;
         session_radar_report = Some(report);
         input_threads.push(t);
     } else if let Input::Devices(d) = input {
@@ -396,7 +421,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
     let out_thread = spawn_output(&sh, plan.sinks)?;
 
     let started = Instant::now();
-    supervise(&sh, &cfg, &stop, input_threads, started);
+    supervise(&sh, &cfg, &stop, input_threads, started, &counters);
     sh.inputs_done.store(true, Ordering::Release);
     let (h_sync, sync_counters, clocks) = sync_thread
         .join()
@@ -442,7 +467,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
 fn start_session(
     sh: &Arc<Shared>,
     s: &milliego_session::Session,
-    realtime: bool,
+    realtime: Option<f64>,
     online_clock: bool,
     counters: &InputCounters,
 ) -> Result<(std::thread::JoinHandle<()>, StreamReport), RunError> {
@@ -716,6 +741,11 @@ fn spawn_stage(
                 continue;
             };
             let t0 = sh2.now_ns();
+            // The view's copy of an IMU sample is offered after the event was processed.
+            let imu = match (&sh2.view, &ev) {
+                (Some(_), SyncOut::Imu { input, .. }) => Some((input.t, input.accel, input.gyro)),
+                _ => None,
+            };
             stage.process(
                 ev,
                 t0,
@@ -726,9 +756,24 @@ fn spawn_stage(
                         sh2.pose_q.push(p);
                     }
                 },
-                |b| sh2.pool.give(b),
+                |b| {
+                    // The frame's pose (if any) is queued by now: the view's copy costs the
+                    // pose path nothing.
+                    if let Some(v) = &sh2.view {
+                        v.offer(ViewEvent::Radar {
+                            t: b.t.unwrap_or(b.host_s),
+                            frame_number: b.frame_number,
+                            points: b.points.clone(),
+                            snr_db: b.snr_db.clone(),
+                        });
+                    }
+                    sh2.pool.give(b)
+                },
             );
             hist.record(sh2.now_ns().saturating_sub(t0));
+            if let (Some(v), Some((t, accel, gyro))) = (&sh2.view, imu) {
+                v.offer(ViewEvent::Imu { t, accel, gyro });
+            }
         }
         sh2.stage_done.store(true, Ordering::Release);
         let offset = stage.radar_time_offset();
@@ -796,6 +841,10 @@ fn spawn_output(
                 end.radar_poses += 1;
                 end.end_to_end.record(sent.saturating_sub(p.read_ns));
             }
+            // Sent and timed: the view's copy comes after.
+            if let Some(v) = &sh2.view {
+                v.offer(ViewEvent::Pose { t: p.t, msg: p.msg });
+            }
         }
         for s in sinks.iter_mut() {
             let _ = s.flush();
@@ -811,8 +860,16 @@ fn supervise(
     stop: &AtomicBool,
     input_threads: Vec<std::thread::JoinHandle<()>>,
     started: Instant,
+    counters: &InputCounters,
 ) {
+    let mut last_status = Instant::now();
     while !input_threads.iter().all(|t| t.is_finished()) {
+        if let Some(v) = &sh.view {
+            if last_status.elapsed() >= Duration::from_millis(100) {
+                last_status = Instant::now();
+                v.offer(ViewEvent::Status(view_status(sh, counters, v)));
+            }
+        }
         let el = started.elapsed().as_secs_f64();
         let idle = cfg.idle_exit_s.is_some_and(|s| {
             let last = sh.last_data_ns.load(Ordering::Relaxed);
@@ -825,6 +882,25 @@ fn supervise(
     }
     for t in input_threads {
         let _ = t.join();
+    }
+    if let Some(v) = &sh.view {
+        v.offer(ViewEvent::Status(view_status(sh, counters, v)));
+    }
+}
+
+/// The counters the live view shows.
+fn view_status(sh: &Shared, c: &InputCounters, v: &ViewTap) -> ViewStatus {
+    ViewStatus {
+        radar_in: c.decoded[0].load(Ordering::Relaxed),
+        imu_in: c.decoded[1].load(Ordering::Relaxed),
+        queue_drops: [
+            sh.radar_q.dropped(),
+            sh.imu_q.dropped(),
+            sh.ev_q.dropped(),
+            sh.pose_q.dropped(),
+            sh.sync_dropped.load(Ordering::Relaxed),
+        ],
+        view_dropped: v.dropped(),
     }
 }
 
@@ -934,6 +1010,7 @@ fn run_summary(e: &RunEnds<'_>, sh: &Shared, c: &InputCounters, latency: &Latenc
         } else {
             0.0
         },
+        view_dropped: sh.view.as_ref().map_or(0, ViewTap::dropped),
     }
 }
 
@@ -950,7 +1027,7 @@ fn feed_session(
     sh: &Shared,
     streams: &SessionStreams<'_>,
     clock: &milliego_session::streams::SessionClock,
-    realtime: bool,
+    realtime: Option<f64>,
     online_clock: bool,
     decoded: &[AtomicU64; 4],
 ) {
@@ -969,8 +1046,13 @@ fn feed_session(
         .fold(f64::INFINITY, f64::min);
     let start = Instant::now();
     let pace = |t: f64| {
-        if realtime {
-            let due = Duration::from_secs_f64((t - t_first).max(0.0));
+        if let Some(speed) = realtime {
+            let speed = if speed.is_finite() && speed > 0.0 {
+                speed
+            } else {
+                1.0
+            };
+            let due = Duration::from_secs_f64((t - t_first).max(0.0) / speed);
             let el = start.elapsed();
             if due > el {
                 std::thread::sleep(due - el);

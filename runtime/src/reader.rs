@@ -34,6 +34,8 @@ pub struct RadarItem {
     pub t: Option<f64>,
     /// Points.
     pub points: Vec<Point>,
+    /// SNR per point \[dB\], when the frame carries side info (else empty).
+    pub snr_db: Vec<f32>,
 }
 
 impl RadarItem {
@@ -54,6 +56,10 @@ impl RadarItem {
             .map_or(0.0, |s| f64::from(s.inter_frame_processing_time_us) * 1e-6);
         self.points.clear();
         self.points.extend_from_slice(&cloud.points);
+        self.snr_db.clear();
+        if let Some(snr) = &cloud.snr_db {
+            self.snr_db.extend_from_slice(snr);
+        }
     }
 }
 
@@ -68,6 +74,7 @@ impl Default for RadarItem {
             processing_s: 0.0,
             t: None,
             points: Vec::with_capacity(POINTS_RESERVED),
+            snr_db: Vec::with_capacity(POINTS_RESERVED),
         }
     }
 }

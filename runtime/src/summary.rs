@@ -37,6 +37,10 @@ pub struct RunSummary {
     pub radar_plausibility: Plausibility,
     /// Wall time per decoded radar frame \[us\] (0 without radar).
     pub per_radar_frame_us: f64,
+    /// Items the live view's hand-off lost (a slow view; `--foxglove`): radar frames, IMU
+    /// samples, poses and status updates it never showed. The pose path never waits for it.
+    #[serde(default)]
+    pub view_dropped: u64,
 }
 
 /// Inputs decoded.
