@@ -71,6 +71,9 @@ enum Command {
     /// The runtime: live ports (or a replay's ptys) or a session -> estimator -> poses over
     /// UDP, serial, TUM.
     Run(run::RunArgs),
+    /// Watch a session live in Foxglove: replayed at its pace (or --speed) through the estimator,
+    /// served over the Foxglove WebSocket protocol (docs/live-view.md).
+    View(run::ViewArgs),
     /// Record the radar and IMU ports into a session.
     Record(record::RecordArgs),
     /// A session and estimated trajectories as MCAP with ROS 2 schemas (Foxglove, ros2 bag).
@@ -85,6 +88,7 @@ fn main() -> ExitCode {
         Command::Demo(a) => demo::run(a),
         Command::Dataset(cmd) => dataset::run(cmd),
         Command::Run(a) => run::run(a),
+        Command::View(a) => run::view(a),
         Command::Radar(cmd) => radar::run(cmd),
         Command::Imu(cmd) => imu::run(cmd),
         Command::Pose(cmd) => pose::run(cmd),

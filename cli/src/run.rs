@@ -2,6 +2,7 @@
 //! over a session, streaming poses to UDP, serial and TUM outputs. See docs/runtime.md.
 
 use clap::{Args, ValueEnum};
+use milliego_live_view::{LiveView, ViewOptions, DEFAULT_ADDR};
 use milliego_runtime::config::FileConfig;
 use milliego_runtime::estimator::EstimatorKind;
 use milliego_runtime::output::OutputSpec;
@@ -9,6 +10,7 @@ use milliego_runtime::pipeline::{run as run_pipeline, Devices, Input, RunConfig}
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
+use std::time::Duration;
 
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
@@ -24,7 +26,7 @@ pub enum EstimatorArg {
     Auto,
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Default, Args)]
 pub struct RunArgs {
     /// Offline: a session directory (as fast as possible; --realtime for its original pace).
     #[arg(long, conflicts_with_all = ["radar_data", "imu"])]
@@ -95,9 +97,96 @@ pub struct RunArgs {
     /// Sessions: align the clocks with the online synchroniser instead of the whole-session fit.
     #[arg(long, requires = "session")]
     online_clock: bool,
+    /// Serve a live Foxglove view (WebSocket, foxglove.websocket.v1) on HOST:PORT; without a
+    /// value on 127.0.0.1:8765 (loopback). Another host is reachable from the network: anyone
+    /// who can connect sees the data (docs/live-view.md).
+    #[arg(long, value_name = "HOST:PORT", num_args = 0..=1, default_missing_value = DEFAULT_ADDR)]
+    foxglove: Option<String>,
+    /// With --foxglove: wait up to this many seconds for a client to subscribe before starting.
+    #[arg(long, value_name = "S", requires = "foxglove")]
+    foxglove_wait: Option<f64>,
     /// More logging (-v info, -vv debug); RUST_LOG overrides.
     #[arg(short, long, action = clap::ArgAction::Count)]
     verbose: u8,
+    /// `milliego view`: pace multiplier of the session.
+    #[arg(skip)]
+    speed: Option<f64>,
+    /// `milliego view`: wait for a client without a limit.
+    #[arg(skip)]
+    wait_forever: bool,
+}
+
+/// `milliego view`: a session replayed at its pace through the estimator, shown live.
+#[derive(Debug, Args)]
+pub struct ViewArgs {
+    /// Session directory (recorded, simulated or imported).
+    session: PathBuf,
+    /// Pace: 1 is the recorded pace, 2 twice as fast.
+    #[arg(long, default_value_t = 1.0)]
+    speed: f64,
+    /// Where the Foxglove WebSocket server listens (loopback by default; another host is
+    /// reachable from the network).
+    #[arg(long, value_name = "HOST:PORT", default_value = DEFAULT_ADDR)]
+    foxglove: String,
+    /// Wait at most this many seconds for a client to subscribe (default: until one does;
+    /// Ctrl-C stops); 0 starts at once.
+    #[arg(long, value_name = "S")]
+    wait: Option<f64>,
+    /// Estimator.
+    #[arg(long, value_enum)]
+    estimator: Option<EstimatorArg>,
+    /// Learned-model file.
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Outputs as for `run`: udp://HOST:PORT, serial:DEV, tum:FILE (repeatable).
+    #[arg(long = "out")]
+    out: Vec<String>,
+    /// Write the summary as JSON to this file.
+    #[arg(long)]
+    summary_json: Option<PathBuf>,
+    /// More logging (-v info, -vv debug); RUST_LOG overrides.
+    #[arg(short, long, action = clap::ArgAction::Count)]
+    verbose: u8,
+}
+
+/// `milliego view`: `run --session DIR --realtime --foxglove ADDR`, at `--speed`.
+pub fn view(a: ViewArgs) -> Result<()> {
+    if !(a.speed.is_finite() && a.speed > 0.0) {
+        return Err(format!("--speed {}: expected a positive number", a.speed).into());
+    }
+    run(RunArgs {
+        session: Some(a.session),
+        realtime: true,
+        estimator: a.estimator,
+        model: a.model,
+        out: a.out,
+        summary_json: a.summary_json,
+        foxglove: Some(a.foxglove),
+        foxglove_wait: a.wait,
+        wait_forever: a.wait.is_none(),
+        speed: Some(a.speed),
+        verbose: a.verbose,
+        ..RunArgs::default()
+    })
+}
+
+/// Starts the live view of `--foxglove`, its tap in `cfg`.
+fn start_view(addr: &str, session: Option<&PathBuf>, cfg: &mut RunConfig) -> Result<LiveView> {
+    let mut o = ViewOptions::parse_addr(addr)?;
+    o.session = session.cloned();
+    if !o.is_loopback() {
+        eprintln!(
+            "warning: the live view listens on {addr}, reachable from other machines: anyone who \
+             can connect sees the poses and sensor data (no authentication, no TLS)"
+        );
+    }
+    let (view, tap) = LiveView::start(&o)?;
+    eprintln!(
+        "live view: ws://{} (Foxglove: Open connection -> Foxglove WebSocket; layout docs/foxglove-layout.json)",
+        view.addr()
+    );
+    cfg.view = Some(tap);
+    Ok(view)
 }
 
 fn init_logging(verbose: u8) {
@@ -223,7 +312,29 @@ pub fn run(a: RunArgs) -> Result<()> {
         signal_hook::flag::register_conditional_shutdown(sig, 130, Arc::clone(&stop))?;
         signal_hook::flag::register(sig, Arc::clone(&stop))?;
     }
-    let summary = run_pipeline(&input, &cfg, stop)?;
+    if let Some(s) = a.speed {
+        cfg.session_speed = s;
+    }
+    let view = match &a.foxglove {
+        Some(addr) => Some(start_view(addr, a.session.as_ref(), &mut cfg)?),
+        None => None,
+    };
+    if let Some(v) = &view {
+        let limit = a.foxglove_wait.map(|s| Duration::from_secs_f64(s.max(0.0)));
+        if a.wait_forever || limit.is_some_and(|l| !l.is_zero()) {
+            eprintln!("live view: waiting for a client to subscribe");
+            if !v.wait_for_subscriber(if a.wait_forever { None } else { limit }, &stop) {
+                eprintln!("live view: no client subscribed; starting anyway");
+            }
+        }
+    }
+    let summary = run_pipeline(&input, &cfg, stop);
+    // The run is over: the view publishes what it still holds, then stops.
+    cfg.view = None;
+    if let Some(v) = view {
+        v.finish(Duration::from_millis(500));
+    }
+    let summary = summary?;
     let text = serde_json::to_string_pretty(&summary.report)?;
     eprintln!("{text}");
     if let Some(p) = a.summary_json.as_ref().or(file.summary_json.as_ref()) {
