@@ -203,9 +203,14 @@ pub fn now_ticks_isr() -> u64 {
     }
 }
 
+/// Runs `f` with interrupts masked (the main loop's side of the stamp rings, the clock read).
+pub fn critical<R>(f: impl FnOnce() -> R) -> R {
+    cortex_m::interrupt::free(|_| f())
+}
+
 /// Timer ticks since boot, from the main loop.
 pub fn now_ticks() -> u64 {
-    cortex_m::interrupt::free(|_| now_ticks_isr())
+    critical(now_ticks_isr)
 }
 
 /// Enables the sensor UARTs' interrupts.

@@ -1,6 +1,9 @@
 //! Single-producer single-consumer rings shared between a receive interrupt (producer) and the
 //! main loop (consumer), without locks: the producer owns `head`, the consumer `tail`, both
 //! free-running u32 counters (`N` a power of two).
+//!
+//! Hardware-free (the one critical section is `crate::hw::critical`), so the host tests compile
+//! this file unchanged: `tests/tests/firmware_rings.rs`.
 
 use core::cell::UnsafeCell;
 use core::sync::atomic::{AtomicU32, Ordering};
@@ -148,7 +151,7 @@ impl<const N: usize> StampRing<N> {
     /// Consumer: the time of the interrupt that received byte `end - 1`, releasing the stamps of
     /// earlier bytes. Called with non-decreasing `end`.
     pub fn find(&self, end: u32) -> Option<u64> {
-        cortex_m::interrupt::free(|_| {
+        crate::hw::critical(|| {
             // SAFETY: interrupts are masked: no producer runs.
             let s = unsafe { &mut *self.inner.get() };
             while s.head != s.tail {
