@@ -66,19 +66,27 @@ def main():
         sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
         sock.connect((u.hostname, u.port))
-    ws = connect(a.url, subprotocols=[SUBPROTOCOL], sock=sock, max_size=None,
-                 open_timeout=10, close_timeout=2)
+    out = {"channels": {}, "counts": {}, "radar": [], "pose": [], "gt_pose": [],
+           "trajectory_last": None, "gt_trajectory_last": None, "tf_last": None,
+           "imu": {"n": 0, "first": None, "last": None}, "velocity_n": 0,
+           "health_last": None, "health_n": 0, "server_info": None, "errors": []}
+    try:
+        with connect(a.url, subprotocols=[SUBPROTOCOL], sock=sock, max_size=None,
+                     open_timeout=10, close_timeout=2) as ws:
+            serve(ws, a, out)
+    except ConnectionClosed:
+        pass
+    with open(a.out, "w") as f:
+        json.dump(out, f)
+
+
+def serve(ws, a, out):
     if ws.subprotocol != SUBPROTOCOL:
         sys.exit(f"server chose subprotocol {ws.subprotocol!r}")
 
     channels = {}   # channel id -> advertisement
     subs = {}       # subscription id -> (topic, decoder)
     next_sub = [1]
-    out = {"channels": {}, "counts": {}, "radar": [], "pose": [], "gt_pose": [],
-           "trajectory_last": None, "gt_trajectory_last": None, "tf_last": None,
-           "imu": {"n": 0, "first": None, "last": None}, "velocity_n": 0,
-           "health_last": None, "health_n": 0, "server_info": None, "errors": []}
-
     def subscribe(chs):
         s = []
         for ch in chs:
@@ -167,13 +175,6 @@ def main():
                 out["errors"].append(f"{topic}: {e}")
     except ConnectionClosed:
         pass
-    finally:
-        try:
-            ws.close()
-        except Exception:  # noqa: BLE001
-            pass
-    with open(a.out, "w") as f:
-        json.dump(out, f)
 
 
 if __name__ == "__main__":

@@ -105,6 +105,10 @@ pub struct RunArgs {
     /// With --foxglove: wait up to this many seconds for a client to subscribe before starting.
     #[arg(long, value_name = "S", requires = "foxglove")]
     foxglove_wait: Option<f64>,
+    /// With --foxglove: messages the server queues per client before it drops that client's
+    /// oldest (default 4096).
+    #[arg(long, value_name = "N", requires = "foxglove")]
+    foxglove_backlog: Option<usize>,
     /// More logging (-v info, -vv debug); RUST_LOG overrides.
     #[arg(short, long, action = clap::ArgAction::Count)]
     verbose: u8,
@@ -132,6 +136,9 @@ pub struct ViewArgs {
     /// Ctrl-C stops); 0 starts at once.
     #[arg(long, value_name = "S")]
     wait: Option<f64>,
+    /// Messages the server queues per client before it drops that client's oldest (default 4096).
+    #[arg(long, value_name = "N")]
+    backlog: Option<usize>,
     /// Estimator.
     #[arg(long, value_enum)]
     estimator: Option<EstimatorArg>,
@@ -163,6 +170,7 @@ pub fn view(a: ViewArgs) -> Result<()> {
         summary_json: a.summary_json,
         foxglove: Some(a.foxglove),
         foxglove_wait: a.wait,
+        foxglove_backlog: a.backlog,
         wait_forever: a.wait.is_none(),
         speed: Some(a.speed),
         verbose: a.verbose,
@@ -171,9 +179,12 @@ pub fn view(a: ViewArgs) -> Result<()> {
 }
 
 /// Starts the live view of `--foxglove`, its tap in `cfg`.
-fn start_view(addr: &str, session: Option<&PathBuf>, cfg: &mut RunConfig) -> Result<LiveView> {
+fn start_view(a: &RunArgs, addr: &str, cfg: &mut RunConfig) -> Result<LiveView> {
     let mut o = ViewOptions::parse_addr(addr)?;
-    o.session = session.cloned();
+    o.session = a.session.clone();
+    if let Some(b) = a.foxglove_backlog {
+        o.backlog = b.max(1);
+    }
     if !o.is_loopback() {
         eprintln!(
             "warning: the live view listens on {addr}, reachable from other machines: anyone who \
@@ -316,7 +327,7 @@ pub fn run(a: RunArgs) -> Result<()> {
         cfg.session_speed = s;
     }
     let view = match &a.foxglove {
-        Some(addr) => Some(start_view(addr, a.session.as_ref(), &mut cfg)?),
+        Some(addr) => Some(start_view(&a, addr, &mut cfg)?),
         None => None,
     };
     if let Some(v) = &view {

@@ -70,6 +70,8 @@ fn sim(dir: &Path, seconds: &str) {
 fn start_view(args: &[&str]) -> (Child, String, std::thread::JoinHandle<String>) {
     let mut child = Command::new(BIN)
         .args(args)
+        // The SDK reports a client's full queue at info level.
+        .env("RUST_LOG", "warn,foxglove=info")
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -304,6 +306,9 @@ fn a_client_that_stops_reading_does_not_slow_the_pose_stream() {
         "127.0.0.1:0",
         "--wait",
         "30",
+        // A short per-client queue: the stalled client's overflows within the session.
+        "--backlog",
+        "64",
         "--estimator",
         "doppler",
         "--out",
@@ -363,7 +368,10 @@ fn a_client_that_stops_reading_does_not_slow_the_pose_stream() {
         "a {:.0} ms gap in the pose stream",
         max_gap * 1e3
     );
-    // The summary reports what the view's hand-off dropped (the SDK drops for the stalled
-    // client inside its own per-client backlog).
+    // The summary reports what the view's own hand-off dropped. Whether the SDK's queue for
+    // the stalled client overflowed depends on how much the socket buffers absorbed (on this
+    // machine they took the whole session: no overflow); it is reported, not required.
+    let full = err.matches("outbox for client").count();
+    println!("stalled client: the SDK's queue for it was full {full} times");
     assert!(sum["view_dropped"].is_u64(), "{sum}");
 }

@@ -19,6 +19,10 @@ pub const LEGACY_SUBPROTOCOL: &str = "foxglove.websocket.v1";
 const SDK_SUBPROTOCOL: &str = "foxglove.sdk.v1";
 /// Longest HTTP head accepted \[B\].
 const HEAD_MAX: usize = 16 * 1024;
+/// Socket buffers between the SDK and a client \[B\]: small, so a client that reads slowly makes
+/// the SDK's per-client queue drop its oldest messages (fresh data for a live view) instead of
+/// megabytes of stale data waiting in the kernel.
+const SOCKET_BUFFER: usize = 64 * 1024;
 
 /// A running front.
 #[derive(Debug)]
@@ -163,6 +167,8 @@ fn serve(mut client: TcpStream, backend: SocketAddr) -> io::Result<()> {
     let (head, legacy) = translate_request(&head);
     let mut server = TcpStream::connect(backend)?;
     server.set_nodelay(true)?;
+    socket2::SockRef::from(&server).set_recv_buffer_size(SOCKET_BUFFER)?;
+    socket2::SockRef::from(&client).set_send_buffer_size(SOCKET_BUFFER)?;
     server.write_all(head.as_bytes())?;
     server.write_all(&rest)?;
     let (answer, rest) = read_head(&mut server)?;

@@ -40,6 +40,19 @@ use std::time::{Duration, Instant};
 pub use front::LEGACY_SUBPROTOCOL;
 pub use publish::{HEALTH_SCHEMA, IMU_SCHEMA, VELOCITY_SCHEMA};
 
+/// Every topic the view may advertise (the ground-truth ones only for sessions that have it).
+pub const TOPICS: &[&str] = &[
+    "/radar/points",
+    "/pose",
+    "/trajectory",
+    "/tf",
+    "/imu",
+    "/velocity",
+    "/health",
+    "/ground_truth/pose",
+    "/ground_truth/trajectory",
+];
+
 /// Where the view listens when `--foxglove` names no address: loopback only.
 pub const DEFAULT_ADDR: &str = "127.0.0.1:8765";
 
