@@ -41,20 +41,23 @@ fn interleaved<A, B>(reps: Reps, mut a: impl FnMut() -> A, mut b: impl FnMut() -
     )
 }
 
-/// Ours: radar framer in 4 KiB chunks, every TLV decoded into an owned point cloud.
+/// Ours: frame in 4 KiB chunks, decode every TLV into a point cloud reused from frame to frame
+/// (`decode_into`, the runtime's path: no allocation once it has grown; the peer's API allocates
+/// per frame).
 pub fn radar_ours(data: &[u8]) -> (usize, usize) {
     use radar_driver::host::PointCloud;
     use radar_driver::{Framer, Poll, DEFAULT_MAX_FRAME};
     let mut framer: Box<Framer<DEFAULT_MAX_FRAME>> = Box::default();
     let (mut frames, mut points) = (0, 0);
+    let mut c = PointCloud::default();
     for chunk in data.chunks(4096) {
         let mut input = chunk;
         loop {
             match framer.poll(&mut input) {
                 Poll::Frame(f) => {
-                    let c = PointCloud::from_frame(&f, None);
+                    c.decode_into(&f, None);
                     frames += 1;
-                    points += black_box(c).points.len();
+                    points += black_box(&c).points.len();
                 }
                 Poll::Dropped { .. } => {}
                 Poll::NeedMore => break,

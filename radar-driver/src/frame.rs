@@ -150,17 +150,31 @@ fn le_u16(buf: &[u8], f: core::ops::Range<usize>) -> u16 {
 /// One's-complement 16-bit sum of little-endian words, folded (0xFFFF over a valid
 /// people-counting header, checksum included).
 pub fn ones_complement_fold(bytes: &[u8]) -> u16 {
-    let mut sum: u32 = 0;
-    for w in bytes.chunks(2) {
-        let v = match *w {
-            [lo, hi] => u16::from_le_bytes([lo, hi]),
-            [lo] => u16::from(lo),
-            _ => 0,
-        };
-        sum += u32::from(v);
+    fold(word_sum(bytes))
+}
+
+/// Plain sum of the little-endian 16-bit words of `bytes` (a last odd byte as its own word);
+/// [`fold`] turns it into the one's-complement sum. Folding once at the end gives the same
+/// result as folding after every word (end-around carries commute), without a dependency
+/// between the additions.
+fn word_sum(bytes: &[u8]) -> u64 {
+    let mut words = bytes.chunks_exact(2);
+    let mut sum: u64 = words
+        .by_ref()
+        .map(|w| u64::from(u16::from_le_bytes([w[0], w[1]])))
+        .sum();
+    if let [lo] = *words.remainder() {
+        sum += u64::from(lo);
+    }
+    sum
+}
+
+/// One's-complement fold of a word sum to 16 bits.
+fn fold(mut sum: u64) -> u16 {
+    while sum > 0xFFFF {
         sum = (sum & 0xFFFF) + (sum >> 16);
     }
-    (sum & 0xFFFF) as u16
+    sum as u16
 }
 
 /// SDK version as sent: major.minor.bugfix.build, one byte each.
@@ -321,9 +335,12 @@ pub(crate) fn detect(buf: &[u8], hint: LayoutHint) -> Detect {
             l
         }
         LayoutHint::Auto => {
-            if buf.len() >= 48 && ones_complement_fold(&buf[..48]) == 0xFFFF {
+            // The 52-byte header's sum continues the 48-byte one.
+            let s48 = buf.get(..48).map(word_sum);
+            let s52 = s48.zip(buf.get(48..52)).map(|(s, rest)| s + word_sum(rest));
+            if s48.is_some_and(|s| fold(s) == 0xFFFF) {
                 Layout::PeopleCounting48
-            } else if buf.len() >= 52 && ones_complement_fold(&buf[..52]) == 0xFFFF {
+            } else if s52.is_some_and(|s| fold(s) == 0xFFFF) {
                 Layout::PeopleCounting52
             } else if buf.len() >= 52 {
                 oob_layout(buf)
@@ -556,13 +573,27 @@ impl<'a> Iterator for TlvIter<'a> {
 
 /// Position of the first full magic word in `hay`.
 pub fn find_magic(hay: &[u8]) -> Option<usize> {
-    memchr::memmem::find(hay, &MAGIC)
+    // memchr for the first byte, then the whole word: `memmem::find` builds a searcher per call,
+    // which costs more than the search on the short windows the framer looks at.
+    let mut start = 0;
+    while let Some(p) = memchr::memchr(MAGIC[0], hay.get(start..)?) {
+        let i = start + p;
+        match hay.get(i..i + MAGIC.len()) {
+            Some(w) if w == MAGIC => return Some(i),
+            Some(_) => start = i + 1,
+            None => return None,
+        }
+    }
+    None
 }
 
 /// Position of the first place where a magic word starts, either whole or as a prefix that runs
 /// into the end of `hay` (so it may complete with the next chunk).
-pub(crate) fn find_magic_or_prefix(hay: &[u8]) -> Option<usize> {
-    if let Some(i) = find_magic(hay) {
+pub(crate) fn find_magic_or_prefix(
+    hay: &[u8],
+    find: impl FnOnce(&[u8]) -> Option<usize>,
+) -> Option<usize> {
+    if let Some(i) = find(hay) {
         return Some(i);
     }
     // No whole magic: only a prefix in the last 7 bytes can still become one.

@@ -15,7 +15,7 @@
 
 use crate::error::{FrameError, FRAME_ERROR_KINDS};
 use crate::frame::{
-    detect, find_magic, find_magic_or_prefix, read_u32, Detect, Frame, Layout, LayoutHint, MAGIC,
+    detect, find_magic_or_prefix, read_u32, Detect, Frame, Layout, LayoutHint, MAGIC,
 };
 
 /// Default buffer size for host use \[B\]: larger than any frame that fits a 10 fps UART budget.
@@ -129,6 +129,7 @@ impl<const N: usize> Framer<N> {
                 scanned: 0,
                 hint,
                 max_len: N,
+                magic: memchr::memmem::Finder::new(&MAGIC),
             },
             last_layout: None,
             in_sync: true,
@@ -444,12 +445,15 @@ struct Scanner {
     scanned: usize,
     hint: LayoutHint,
     max_len: usize,
+    /// The magic-word searcher, built once (building one per search costs more than searching
+    /// a frame).
+    magic: memchr::memmem::Finder<'static>,
 }
 
 impl Scanner {
     /// Looks at a window that starts wherever the previous candidate ended.
     fn step(&mut self, w: &[u8]) -> Step {
-        match find_magic_or_prefix(w) {
+        match find_magic_or_prefix(w, |h| self.magic.find(h)) {
             None => return Step::Skip(w.len()),
             Some(0) => {}
             Some(i) => return Step::Skip(i),
@@ -535,7 +539,10 @@ impl Scanner {
     /// Offset of a magic word after the candidate's own, scanning only bytes not scanned before.
     fn inner_magic(&mut self, w: &[u8]) -> Option<usize> {
         let from = self.scanned.saturating_sub(MAGIC.len() - 1).max(1);
-        let found = w.get(from..).and_then(find_magic).map(|k| k + from);
+        let found = w
+            .get(from..)
+            .and_then(|h| self.magic.find(h))
+            .map(|k| k + from);
         self.scanned = w.len();
         found
     }
