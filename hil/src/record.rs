@@ -543,6 +543,23 @@ fn open(
         })
 }
 
+/// One read of a port: `Some(n)` bytes, `None` for a timeout or an interruption (try again), or
+/// the error to report, with a hint naming `what` (the device or the hub) as the likely cause.
+fn read_port<P: io::Read>(port: &mut P, buf: &mut [u8], what: &str) -> io::Result<Option<usize>> {
+    match port.read(buf) {
+        Ok(0) => Err(io::Error::new(
+            io::ErrorKind::UnexpectedEof,
+            format!("the port reported end of file ({what} gone?)"),
+        )),
+        Ok(n) => Ok(Some(n)),
+        Err(e) if crate::is_transient(&e) => Ok(None),
+        Err(e) => Err(io::Error::new(
+            e.kind(),
+            format!("{e} ({what} unplugged, or the other end closed?)"),
+        )),
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
 fn read_loop<P: io::Read>(
     kind: StreamKind,
@@ -568,22 +585,11 @@ fn read_loop<P: io::Read>(
     };
     let mut error = None;
     while !stop.load(Ordering::Relaxed) {
-        let n = match port.read(&mut buf) {
-            Ok(0) => {
-                error = fail(
-                    "read",
-                    io::Error::new(
-                        io::ErrorKind::UnexpectedEof,
-                        "the port reported end of file (device gone?)",
-                    ),
-                );
-                break;
-            }
-            Ok(n) => n,
-            Err(e) if crate::is_transient(&e) => continue,
+        let n = match read_port(&mut port, &mut buf, "device") {
+            Ok(Some(n)) => n,
+            Ok(None) => continue,
             Err(e) => {
-                let hint = format!("{e} (device unplugged, or the other end closed?)");
-                error = fail("read", io::Error::new(e.kind(), hint));
+                error = fail("read", e);
                 break;
             }
         };
@@ -680,22 +686,11 @@ fn hub_read_loop<P: io::Read>(
     };
     let mut error = None;
     'read: while !stop.load(Ordering::Relaxed) {
-        let n = match port.read(&mut buf) {
-            Ok(0) => {
-                error = fail(
-                    "read",
-                    io::Error::new(
-                        io::ErrorKind::UnexpectedEof,
-                        "the port reported end of file (hub gone?)",
-                    ),
-                );
-                break;
-            }
-            Ok(n) => n,
-            Err(e) if crate::is_transient(&e) => continue,
+        let n = match read_port(&mut port, &mut buf, "hub") {
+            Ok(Some(n)) => n,
+            Ok(None) => continue,
             Err(e) => {
-                let hint = format!("{e} (hub unplugged, or the other end closed?)");
-                error = fail("read", io::Error::new(e.kind(), hint));
+                error = fail("read", e);
                 break;
             }
         };
