@@ -135,6 +135,8 @@ pub struct Latencies {
     pub end_to_end: Histogram,
     /// Predicted poses: IMU sample read -> pose sent.
     pub imu_to_pose: Histogram,
+    /// Handing one item to the live view (copy and `try_send`).
+    pub view_handoff: Histogram,
 }
 
 /// What a run did.
@@ -426,19 +428,21 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
     let (h_sync, sync_counters, clocks) = sync_thread
         .join()
         .map_err(|_| RunError::Panicked { thread: "sync" })?;
-    let (h_est, stage_counters, radar_time_offset) = stage_thread
+    let (h_est, stage_counters, radar_time_offset, mut view_handoff) = stage_thread
         .join()
         .map_err(|_| RunError::Panicked { thread: "estimate" })?;
     let out = out_thread
         .join()
         .map_err(|_| RunError::Panicked { thread: "output" })?;
     let wall_s = started.elapsed().as_secs_f64();
+    view_handoff.merge(&out.view_handoff);
     let latency = Latencies {
         sync: h_sync,
         estimate: h_est,
         output: out.output.clone(),
         end_to_end: out.end_to_end.clone(),
         imu_to_pose: out.imu_to_pose.clone(),
+        view_handoff,
     };
     let ends = RunEnds {
         estimator: cfg.estimator,
@@ -717,9 +721,9 @@ fn spawn_sync(
     })
 }
 
-/// What the estimator stage hands back: its latency histogram, its counters and the radar time
-/// offset its estimators estimated (estimate, deviation \[s\]).
-type StageEnd = (Histogram, StageCounters, Option<(f64, f64)>);
+/// What the estimator stage hands back: its latency histogram, its counters, the radar time
+/// offset its estimators estimated (estimate, deviation \[s\]) and its view hand-off times.
+type StageEnd = (Histogram, StageCounters, Option<(f64, f64)>, Histogram);
 
 /// The estimator thread: events -> poses (live, a full pose queue drops its oldest).
 fn spawn_stage(
@@ -731,6 +735,7 @@ fn spawn_stage(
     spawn_named("estimate", move || {
         let mut stage = Stage::new(stage_cfg, built);
         let mut hist = Histogram::default();
+        let mut handoff = Histogram::default();
         loop {
             let done = sh2.sync_done.load(Ordering::Acquire);
             let Some(ev) = sh2.ev_q.pop() else {
@@ -760,24 +765,28 @@ fn spawn_stage(
                     // The frame's pose (if any) is queued by now: the view's copy costs the
                     // pose path nothing.
                     if let Some(v) = &sh2.view {
+                        let h0 = sh2.now_ns();
                         v.offer(ViewEvent::Radar {
                             t: b.t.unwrap_or(b.host_s),
                             frame_number: b.frame_number,
                             points: b.points.clone(),
                             snr_db: b.snr_db.clone(),
                         });
+                        handoff.record(sh2.now_ns().saturating_sub(h0));
                     }
                     sh2.pool.give(b)
                 },
             );
             hist.record(sh2.now_ns().saturating_sub(t0));
             if let (Some(v), Some((t, accel, gyro))) = (&sh2.view, imu) {
+                let h0 = sh2.now_ns();
                 v.offer(ViewEvent::Imu { t, accel, gyro });
+                handoff.record(sh2.now_ns().saturating_sub(h0));
             }
         }
         sh2.stage_done.store(true, Ordering::Release);
         let offset = stage.radar_time_offset();
-        (hist, stage.counters, offset)
+        (hist, stage.counters, offset, handoff)
     })
 }
 
@@ -794,6 +803,8 @@ struct OutputEnd {
     sent: u32,
     send_errors: u64,
     radar_poses: u64,
+    /// Handing poses to the live view.
+    view_handoff: Histogram,
 }
 
 /// The output thread: poses -> sequence number, drop flags, host time -> every sink.
@@ -843,7 +854,9 @@ fn spawn_output(
             }
             // Sent and timed: the view's copy comes after.
             if let Some(v) = &sh2.view {
+                let h0 = sh2.now_ns();
                 v.offer(ViewEvent::Pose { t: p.t, msg: p.msg });
+                end.view_handoff.record(sh2.now_ns().saturating_sub(h0));
             }
         }
         for s in sinks.iter_mut() {
@@ -1003,6 +1016,7 @@ fn run_summary(e: &RunEnds<'_>, sh: &Shared, c: &InputCounters, latency: &Latenc
             output: latency.output.summary(),
             end_to_end: latency.end_to_end.summary(),
             imu_to_pose: latency.imu_to_pose.summary(),
+            view_handoff: latency.view_handoff.summary(),
         },
         radar_plausibility: plausibility(e.radar_report, &c.radar),
         per_radar_frame_us: if radar_in > 0 {

@@ -165,10 +165,14 @@ pub struct LatencySummary {
     pub end_to_end: HistogramSummary,
     /// Predicted poses: IMU sample read -> sent.
     pub imu_to_pose: HistogramSummary,
+    /// Time the estimator and output threads spent handing one item to the live view (copy and
+    /// `try_send`; empty without `--foxglove`).
+    #[serde(default)]
+    pub view_handoff: HistogramSummary,
 }
 
 /// One latency histogram.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
 pub struct HistogramSummary {
     /// Values recorded.
     pub count: u64,
