@@ -362,9 +362,11 @@ fn a_client_that_stops_reading_does_not_slow_the_pose_stream() {
         max_gap * 1e3,
         sum["view_dropped"]
     );
-    assert!((18.0..22.0).contains(&rate), "rate {rate:.1} Hz");
+    // Bounds with room for a loaded CI machine; a pose path waiting on the stalled client would
+    // stop the stream for good.
+    assert!((17.0..23.0).contains(&rate), "rate {rate:.1} Hz");
     assert!(
-        max_gap < 0.25,
+        max_gap < 0.5,
         "a {:.0} ms gap in the pose stream",
         max_gap * 1e3
     );
