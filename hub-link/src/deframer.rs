@@ -77,20 +77,16 @@ pub struct DeframerCounters {
 /// encoded frame: [`crate::serial_len_max`]`(largest body)` (the host uses [`crate::FRAME_MAX`]).
 #[derive(Debug)]
 pub struct Deframer<const N: usize> {
-    buf: [u8; N],
+    split: cobs::Splitter<N>,
     msg: [u8; N],
-    len: usize,
-    overflow: usize,
     counters: DeframerCounters,
 }
 
 impl<const N: usize> Default for Deframer<N> {
     fn default() -> Self {
         Deframer {
-            buf: [0; N],
+            split: cobs::Splitter::default(),
             msg: [0; N],
-            len: 0,
-            overflow: 0,
             counters: DeframerCounters::default(),
         }
     }
@@ -104,73 +100,59 @@ impl<const N: usize> Deframer<N> {
 
     /// Bytes held for an unfinished frame \[B\].
     pub fn buffered(&self) -> usize {
-        self.len + self.overflow
+        self.split.buffered()
     }
 
     /// Forgets an unfinished frame (the stream was interrupted, e.g. the port was reopened): its
     /// bytes are counted in [`DeframerCounters::bytes_dropped`]; the counters are kept. Returns
     /// the bytes dropped \[B\].
     pub fn resync(&mut self) -> usize {
-        let dropped = self.buffered();
+        let dropped = self.split.resync();
         self.counters.bytes_dropped += dropped as u64;
-        self.len = 0;
-        self.overflow = 0;
         dropped
     }
 
     /// Consumes bytes from `input` (advancing it) up to the next complete frame.
     pub fn poll(&mut self, input: &mut &[u8]) -> Event<'_> {
-        while let Some((&b, rest)) = input.split_first() {
-            *input = rest;
-            self.counters.bytes_in += 1;
-            if b != 0 {
-                if self.len < N {
-                    self.buf[self.len] = b;
-                    self.len += 1;
-                } else {
-                    self.overflow += 1;
-                }
-                continue;
+        let (bytes, wire) = match self.split.poll(input) {
+            cobs::Split::Frame { cobs, wire } => (cobs, wire),
+            cobs::Split::NeedMore => {
+                self.sync();
+                return Event::NeedMore;
             }
-            let frame_bytes = self.len + self.overflow + 1;
-            if self.overflow > 0 {
+            cobs::Split::Overflow { dropped } => {
+                self.sync();
                 self.counters.frames_overflow += 1;
-                self.counters.bytes_dropped += frame_bytes as u64;
-                self.len = 0;
-                self.overflow = 0;
-                return Event::BadFrame(FrameError::Overflow {
-                    dropped: frame_bytes,
-                });
+                self.counters.bytes_dropped += dropped as u64;
+                return Event::BadFrame(FrameError::Overflow { dropped });
             }
-            if self.len == 0 {
-                self.counters.empty_frames += 1;
-                continue;
+        };
+        let decoded = cobs::decode(bytes, &mut self.msg);
+        self.sync();
+        let c = &mut self.counters;
+        let err = match decoded {
+            Err(e) => {
+                c.frames_bad_cobs += 1;
+                FrameError::Cobs(e)
             }
-            let result = cobs::decode(&self.buf[..self.len], &mut self.msg);
-            self.len = 0;
-            let err = match result {
-                Err(e) => {
-                    self.counters.frames_bad_cobs += 1;
-                    FrameError::Cobs(e)
+            Ok(n) => match Message::decode(&self.msg[..n]) {
+                Ok(m) => {
+                    c.messages_ok += 1;
+                    return Event::Message(m);
                 }
-                Ok(n) => match Message::decode(&self.msg[..n]) {
-                    Ok(_) => {
-                        self.counters.messages_ok += 1;
-                        // Decoded twice so the returned borrow is of `self.msg` alone.
-                        return match Message::decode(&self.msg[..n]) {
-                            Ok(m) => Event::Message(m),
-                            Err(e) => Event::BadFrame(FrameError::Message(e)),
-                        };
-                    }
-                    Err(e) => {
-                        self.counters.frames_bad_message += 1;
-                        FrameError::Message(e)
-                    }
-                },
-            };
-            self.counters.bytes_dropped += frame_bytes as u64;
-            return Event::BadFrame(err);
-        }
-        Event::NeedMore
+                Err(e) => {
+                    c.frames_bad_message += 1;
+                    FrameError::Message(e)
+                }
+            },
+        };
+        c.bytes_dropped += wire as u64;
+        Event::BadFrame(err)
+    }
+
+    /// The splitter's counts into the counters.
+    fn sync(&mut self) {
+        self.counters.bytes_in = self.split.bytes_in;
+        self.counters.empty_frames = self.split.empty_frames;
     }
 }

@@ -134,6 +134,97 @@ impl StreamEncoder {
     }
 }
 
+/// Splits a byte stream at its 0x00 delimiters into COBS frames of at most `N` encoded bytes:
+/// the part of a link's deframer that does not depend on its messages (the pose link's and the
+/// hub link's deframers both decode what this releases).
+#[derive(Debug)]
+pub struct Splitter<const N: usize> {
+    buf: [u8; N],
+    len: usize,
+    overflow: usize,
+    /// Bytes consumed \[B\].
+    pub bytes_in: u64,
+    /// Empty frames (consecutive delimiters), skipped.
+    pub empty_frames: u64,
+}
+
+/// What one [`Splitter::poll`] released.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Split<'a> {
+    /// A delimited frame, still COBS-encoded, without its delimiter.
+    Frame {
+        /// The encoded bytes.
+        cobs: &'a [u8],
+        /// Its bytes on the wire, delimiter included \[B\].
+        wire: usize,
+    },
+    /// A frame longer than the buffer before its delimiter: all its bytes are gone.
+    Overflow {
+        /// Its bytes on the wire, delimiter included \[B\].
+        dropped: usize,
+    },
+    /// The input is used up.
+    NeedMore,
+}
+
+impl<const N: usize> Default for Splitter<N> {
+    fn default() -> Self {
+        Splitter {
+            buf: [0; N],
+            len: 0,
+            overflow: 0,
+            bytes_in: 0,
+            empty_frames: 0,
+        }
+    }
+}
+
+impl<const N: usize> Splitter<N> {
+    /// Bytes held for an unfinished frame \[B\].
+    pub fn buffered(&self) -> usize {
+        self.len + self.overflow
+    }
+
+    /// Forgets an unfinished frame; returns its bytes \[B\].
+    pub fn resync(&mut self) -> usize {
+        let dropped = self.buffered();
+        self.len = 0;
+        self.overflow = 0;
+        dropped
+    }
+
+    /// Consumes bytes from `input` (advancing it) up to the next delimiter that ends a frame.
+    pub fn poll(&mut self, input: &mut &[u8]) -> Split<'_> {
+        while let Some((&b, rest)) = input.split_first() {
+            *input = rest;
+            self.bytes_in += 1;
+            if b != 0 {
+                if self.len < N {
+                    self.buf[self.len] = b;
+                    self.len += 1;
+                } else {
+                    self.overflow += 1;
+                }
+                continue;
+            }
+            let wire = self.len + self.overflow + 1;
+            let len = core::mem::take(&mut self.len);
+            if core::mem::take(&mut self.overflow) > 0 {
+                return Split::Overflow { dropped: wire };
+            }
+            if len == 0 {
+                self.empty_frames += 1;
+                continue;
+            }
+            return Split::Frame {
+                cobs: &self.buf[..len],
+                wire,
+            };
+        }
+        Split::NeedMore
+    }
+}
+
 /// Decodes one frame `src` (without its delimiter) into `dst`; returns the decoded length.
 pub fn decode(src: &[u8], dst: &mut [u8]) -> Result<usize, CobsError> {
     let mut i = 0;

@@ -77,18 +77,14 @@ pub struct DeframerCounters {
 /// encoded frame (at least [`cobs::max_encoded_len`]`(`[`MESSAGE_LEN`]`)` for version 1).
 #[derive(Debug)]
 pub struct Deframer<const N: usize> {
-    buf: [u8; N],
-    len: usize,
-    overflow: usize,
+    split: cobs::Splitter<N>,
     counters: DeframerCounters,
 }
 
 impl<const N: usize> Default for Deframer<N> {
     fn default() -> Self {
         Deframer {
-            buf: [0; N],
-            len: 0,
-            overflow: 0,
+            split: cobs::Splitter::default(),
             counters: DeframerCounters::default(),
         }
     }
@@ -102,60 +98,46 @@ impl<const N: usize> Deframer<N> {
 
     /// Bytes held for an unfinished frame \[B\].
     pub fn buffered(&self) -> usize {
-        self.len + self.overflow
+        self.split.buffered()
     }
 
     /// Consumes bytes from `input` (advancing it) up to the next complete frame.
     pub fn poll(&mut self, input: &mut &[u8]) -> Event {
-        while let Some((&b, rest)) = input.split_first() {
-            *input = rest;
-            self.counters.bytes_in += 1;
-            if b != 0 {
-                if self.len < N {
-                    self.buf[self.len] = b;
-                    self.len += 1;
-                } else {
-                    self.overflow += 1;
-                }
-                continue;
+        let c = &mut self.counters;
+        let ev = match self.split.poll(input) {
+            cobs::Split::NeedMore => Event::NeedMore,
+            cobs::Split::Overflow { dropped } => {
+                c.frames_overflow += 1;
+                c.bytes_dropped += dropped as u64;
+                Event::BadFrame(FrameError::Overflow { dropped })
             }
-            let frame_bytes = self.len + self.overflow + 1;
-            if self.overflow > 0 {
-                self.counters.frames_overflow += 1;
-                self.counters.bytes_dropped += frame_bytes as u64;
-                self.len = 0;
-                self.overflow = 0;
-                return Event::BadFrame(FrameError::Overflow {
-                    dropped: frame_bytes,
-                });
-            }
-            if self.len == 0 {
-                self.counters.empty_frames += 1;
-                continue;
-            }
-            let mut msg = [0u8; N];
-            let result = cobs::decode(&self.buf[..self.len], &mut msg);
-            self.len = 0;
-            let ev = match result {
-                Err(e) => {
-                    self.counters.frames_bad_cobs += 1;
-                    Event::BadFrame(FrameError::Cobs(e))
-                }
-                Ok(n) => match PoseMessage::decode(&msg[..n]) {
-                    Ok(m) => {
-                        self.counters.messages_ok += 1;
-                        return Event::Message(m);
-                    }
+            cobs::Split::Frame { cobs: bytes, wire } => {
+                let mut msg = [0u8; N];
+                let ev = match cobs::decode(bytes, &mut msg) {
                     Err(e) => {
-                        self.counters.frames_bad_message += 1;
-                        Event::BadFrame(FrameError::Message(e))
+                        c.frames_bad_cobs += 1;
+                        Event::BadFrame(FrameError::Cobs(e))
                     }
-                },
-            };
-            self.counters.bytes_dropped += frame_bytes as u64;
-            return ev;
-        }
-        Event::NeedMore
+                    Ok(n) => match PoseMessage::decode(&msg[..n]) {
+                        Ok(m) => {
+                            c.messages_ok += 1;
+                            Event::Message(m)
+                        }
+                        Err(e) => {
+                            c.frames_bad_message += 1;
+                            Event::BadFrame(FrameError::Message(e))
+                        }
+                    },
+                };
+                if matches!(ev, Event::BadFrame(_)) {
+                    c.bytes_dropped += wire as u64;
+                }
+                ev
+            }
+        };
+        c.bytes_in = self.split.bytes_in;
+        c.empty_frames = self.split.empty_frames;
+        ev
     }
 }
 
