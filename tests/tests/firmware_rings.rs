@@ -143,7 +143,11 @@ fn an_interrupt_and_a_main_loop_on_two_threads_lose_and_reorder_nothing() {
     }
     producer.join().unwrap();
     let refused = refused.load(Ordering::Relaxed);
-    assert_eq!(got + refused, BYTES, "every byte received or counted as refused");
+    assert_eq!(
+        got + refused,
+        BYTES,
+        "every byte received or counted as refused"
+    );
     assert_eq!(u64::from(ring.written()), got);
     assert!(order_ok, "bytes reordered");
     assert!(ring.high_water() <= 256);
