@@ -199,7 +199,11 @@ fn main() -> ExitCode {
     );
     if let Some(path) = &a.json {
         let report = Report::new(machine, a.quick, rows);
-        if let Err(e) = std::fs::write(path, report.to_json()) {
+        let dir = path.parent().filter(|d| !d.as_os_str().is_empty());
+        if let Err(e) = dir
+            .map_or(Ok(()), std::fs::create_dir_all)
+            .and_then(|()| std::fs::write(path, report.to_json()))
+        {
             eprintln!("{}: {e}", path.display());
             return ExitCode::FAILURE;
         }
