@@ -59,15 +59,9 @@ pub struct RunArgs {
     /// Do not configure the sensors (replayed ports, or sensors already streaming).
     #[arg(long)]
     no_configure: bool,
-    /// Estimator.
-    #[arg(long, value_enum)]
-    estimator: Option<EstimatorArg>,
-    /// Learned-model file.
-    #[arg(long)]
-    model: Option<PathBuf>,
-    /// Output: udp://HOST:PORT, serial:DEV or serial:DEV@BAUD, tum:FILE (repeatable).
-    #[arg(long = "out")]
-    out: Vec<String>,
+    /// Estimator, model, outputs, summary, logging (shared with `view`).
+    #[command(flatten)]
+    pipe: PipelineArgs,
     /// Configuration file (TOML); flags override it.
     #[arg(long)]
     config: Option<PathBuf>,
@@ -85,9 +79,6 @@ pub struct RunArgs {
     /// Radar updates may correct heading (as `odometry --radar-heading`; docs/odometry.md).
     #[arg(long)]
     radar_heading: bool,
-    /// Write the summary as JSON to this file.
-    #[arg(long)]
-    summary_json: Option<PathBuf>,
     /// Stop after this many seconds.
     #[arg(long)]
     duration: Option<f64>,
@@ -109,9 +100,6 @@ pub struct RunArgs {
     /// oldest (default 4096).
     #[arg(long, value_name = "N", requires = "foxglove")]
     foxglove_backlog: Option<usize>,
-    /// More logging (-v info, -vv debug); RUST_LOG overrides.
-    #[arg(short, long, action = clap::ArgAction::Count)]
-    verbose: u8,
     /// `milliego view`: pace multiplier of the session.
     #[arg(skip)]
     speed: Option<f64>,
@@ -139,13 +127,21 @@ pub struct ViewArgs {
     /// Messages the server queues per client before it drops that client's oldest (default 4096).
     #[arg(long, value_name = "N")]
     backlog: Option<usize>,
+    /// Estimator, model, outputs, summary, logging (as for `run`).
+    #[command(flatten)]
+    pipe: PipelineArgs,
+}
+
+/// The flags `run` and `view` share: what estimates, where poses and the summary go, logging.
+#[derive(Debug, Default, Args)]
+pub struct PipelineArgs {
     /// Estimator.
     #[arg(long, value_enum)]
     estimator: Option<EstimatorArg>,
     /// Learned-model file.
     #[arg(long)]
     model: Option<PathBuf>,
-    /// Outputs as for `run`: udp://HOST:PORT, serial:DEV, tum:FILE (repeatable).
+    /// Output: udp://HOST:PORT, serial:DEV or serial:DEV@BAUD, tum:FILE (repeatable).
     #[arg(long = "out")]
     out: Vec<String>,
     /// Write the summary as JSON to this file.
@@ -164,16 +160,12 @@ pub fn view(a: ViewArgs) -> Result<()> {
     run(RunArgs {
         session: Some(a.session),
         realtime: true,
-        estimator: a.estimator,
-        model: a.model,
-        out: a.out,
-        summary_json: a.summary_json,
+        pipe: a.pipe,
         foxglove: Some(a.foxglove),
         foxglove_wait: a.wait,
         foxglove_backlog: a.backlog,
         wait_forever: a.wait.is_none(),
         speed: Some(a.speed),
-        verbose: a.verbose,
         ..RunArgs::default()
     })
 }
@@ -217,13 +209,13 @@ fn init_logging(verbose: u8) {
 }
 
 pub fn run(a: RunArgs) -> Result<()> {
-    init_logging(a.verbose);
+    init_logging(a.pipe.verbose);
     let file = match &a.config {
         Some(p) => FileConfig::load(p)?,
         None => FileConfig::default(),
     };
     let mut cfg = RunConfig {
-        estimator: match a.estimator {
+        estimator: match a.pipe.estimator {
             Some(EstimatorArg::Model) => EstimatorKind::Model,
             Some(EstimatorArg::Doppler) => EstimatorKind::Doppler,
             Some(EstimatorArg::Imu) => EstimatorKind::Imu,
@@ -233,14 +225,15 @@ pub fn run(a: RunArgs) -> Result<()> {
         ..RunConfig::default()
     };
     // Default: the shipped int8 model, when run from the repository.
-    cfg.model = a.model.clone().or(file.model.clone()).or_else(|| {
+    cfg.model = a.pipe.model.clone().or(file.model.clone()).or_else(|| {
         let p = PathBuf::from("models/compact/model-int8.onnx");
         p.is_file().then_some(p)
     });
-    cfg.outputs = if a.out.is_empty() {
+    cfg.outputs = if a.pipe.out.is_empty() {
         file.outputs()?
     } else {
-        a.out
+        a.pipe
+            .out
             .iter()
             .map(|o| o.parse::<OutputSpec>())
             .collect::<std::result::Result<_, _>>()?
@@ -348,7 +341,7 @@ pub fn run(a: RunArgs) -> Result<()> {
     let summary = summary?;
     let text = serde_json::to_string_pretty(&summary.report)?;
     eprintln!("{text}");
-    if let Some(p) = a.summary_json.as_ref().or(file.summary_json.as_ref()) {
+    if let Some(p) = a.pipe.summary_json.as_ref().or(file.summary_json.as_ref()) {
         std::fs::write(p, &text).map_err(|e| format!("{}: {e}", p.display()))?;
     }
     Ok(())
