@@ -10,11 +10,14 @@ use std::process::ExitCode;
 mod dataset;
 mod demo;
 mod eval;
+#[cfg(feature = "desk")]
 mod import;
 mod imu;
+#[cfg(feature = "desk")]
 mod mcap;
 mod odometry;
 mod output;
+#[cfg(feature = "desk")]
 mod plot;
 mod pose;
 mod radar;
@@ -56,6 +59,7 @@ enum Command {
     /// Trajectory error of an estimate against ground truth (ATE, RPE, drift), as evo computes it.
     Eval(eval::EvalArgs),
     /// Figures (PNG/SVG): trajectory coloured by error, error over time, ATE CDF, a radar frame.
+    #[cfg(feature = "desk")]
     #[command(subcommand)]
     Plot(plot::PlotCmd),
     /// Pose link: listen to a pose stream (UDP or serial) and print or save it.
@@ -77,8 +81,10 @@ enum Command {
     /// Record the radar and IMU ports into a session.
     Record(record::RecordArgs),
     /// A session and estimated trajectories as MCAP with ROS 2 schemas (Foxglove, ros2 bag).
+    #[cfg(feature = "desk")]
     ExportMcap(mcap::McapArgs),
     /// Recordings in: ROS 1 bags, ROS 2 bags (sqlite3 / MCAP), MCAP files -> a session.
+    #[cfg(feature = "desk")]
     Import(import::ImportArgs),
 }
 
@@ -93,6 +99,7 @@ fn main() -> ExitCode {
         Command::Imu(cmd) => imu::run(cmd),
         Command::Pose(cmd) => pose::run(cmd),
         Command::Eval(a) => eval::run(a),
+        #[cfg(feature = "desk")]
         Command::Plot(cmd) => plot::run(cmd),
         Command::Score(a) => score::run(a),
         Command::Odometry(a) => odometry::run(a),
@@ -100,7 +107,9 @@ fn main() -> ExitCode {
         Command::Sim(args) => sim::run(args),
         Command::Replay(args) => replay::run(args),
         Command::Record(args) => record::run(args),
+        #[cfg(feature = "desk")]
         Command::ExportMcap(args) => mcap::run(args),
+        #[cfg(feature = "desk")]
         Command::Import(args) => import::run(args),
     };
     match result {
