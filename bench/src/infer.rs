@@ -317,6 +317,7 @@ pub fn rows(
     tract_fp32: Result<Timing, String>,
     tract_int8: Result<Timing, String>,
     tract_int8_stock: Result<Timing, String>,
+    tract_int8_two_threads: Result<Timing, String>,
     ort: Result<OrtResult, String>,
     note: &str,
 ) -> Vec<Row> {
@@ -416,6 +417,16 @@ pub fn rows(
             ms(&tract_int8_stock, false),
             l,
             "milliego-accel (packed im2col, quantize); same values",
+        ),
+        Row::new(
+            group,
+            "tract int8, 2 threads",
+            ms(&tract_int8_two_threads, false),
+            "ms",
+            "tract int8, 1 thread",
+            ms(&tract_int8, false),
+            l,
+            "multithreaded matmul (`milliego run --threads 2`); same values",
         ),
         Row::new(
             group,
@@ -526,21 +537,10 @@ pub fn profile(
     })
 }
 
-#[cfg(feature = "multithread")]
 fn plan_with_threads(typed: TypedModel, threads: usize) -> Result<Arc<TypedSimplePlan>, String> {
     let mut opts = tract_onnx::tract_core::runtime::RunOptions::default();
     if threads > 1 {
         opts.executor = Some(tract_linalg::multithread::Executor::multithread(threads));
     }
     TypedSimplePlan::new_with_options(typed, &opts).map_err(|e| format!("{e:#}"))
-}
-
-#[cfg(not(feature = "multithread"))]
-fn plan_with_threads(typed: TypedModel, threads: usize) -> Result<Arc<TypedSimplePlan>, String> {
-    if threads > 1 {
-        return Err(
-            "--threads > 1 needs `--features multithread` (tract-linalg/multithread-mm)".into(),
-        );
-    }
-    TypedSimplePlan::new(typed).map_err(|e| format!("{e:#}"))
 }

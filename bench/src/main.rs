@@ -1,4 +1,4 @@
-//! `milliego-bench [--json FILE] [--quick] [--paper-dir DIR] [--e2e CMD]`: the whole table.
+//! `milliego-bench [--json FILE] [--quick] [--paper-dir DIR] [--e2e CMD]...`: the whole table.
 //! `milliego-bench --profile MODEL [--threads N]`: per-op-type time of one graph in tract.
 //! `milliego-bench --tract-one MODEL --inputs BUNDLE`: one graph's tract timing as JSON (used as
 //! a child process by the table, so each graph's peak RSS delta is its own).
@@ -22,9 +22,10 @@ struct Args {
     /// Paper-size graphs (generated with `python -m milliego_models.paper_graph` when absent).
     #[arg(long)]
     paper_dir: Option<PathBuf>,
-    /// Shell command printing a JSON summary of `milliego run` (end-to-end rows).
+    /// Shell command printing a JSON summary of `milliego run` (end-to-end rows); repeat it for
+    /// several (e.g. `--e2e 'scripts/e2e-latency model' --e2e 'scripts/e2e-latency doppler --view'`).
     #[arg(long)]
-    e2e: Option<String>,
+    e2e: Vec<String>,
     /// Skip the paper-size graph (it needs the Python venv to generate and ~1 min to time).
     #[arg(long)]
     no_paper: bool,
@@ -34,7 +35,7 @@ struct Args {
     /// Print the per-op-type profile of MODEL in tract and exit.
     #[arg(long, value_name = "MODEL")]
     profile: Option<PathBuf>,
-    /// tract threads for --profile and --tract-one (more than 1 needs the `multithread` feature).
+    /// tract threads for --profile and --tract-one.
     #[arg(long, default_value_t = 1)]
     threads: usize,
     /// Time MODEL in tract and print its timing as one JSON line (child-process mode).
@@ -184,10 +185,17 @@ fn main() -> ExitCode {
         let t8 = infer::tract_time_child(&int8, &bundle, runs, warmup, 1, true);
         // The same int8 plan without milliego-accel's passes: what they buy, in the same run.
         let t8_stock = infer::tract_time_child(&int8, &bundle, runs, warmup, 1, false);
+        // Two threads: what a board with a core to spare gains (`milliego run --threads 2`).
+        let t8_two = infer::tract_time_child(&int8, &bundle, runs, warmup, 2, true);
         let ort = infer::ort_time(&root, &fp32, &int8, &bundle, runs, warmup);
-        rows.extend(infer::rows(&group, t32, t8, t8_stock, ort, &note));
+        rows.extend(infer::rows(&group, t32, t8, t8_stock, t8_two, ort, &note));
     }
-    rows.extend(e2e::rows(&milliego_binary(&root), a.e2e.as_deref()));
+    if a.e2e.is_empty() {
+        rows.extend(e2e::rows(&milliego_binary(&root), None));
+    }
+    for cmd in &a.e2e {
+        rows.extend(e2e::rows(&milliego_binary(&root), Some(cmd)));
+    }
 
     print!("{}", format_table(&rows));
     println!(

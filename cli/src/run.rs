@@ -141,6 +141,10 @@ pub struct PipelineArgs {
     /// Learned-model file.
     #[arg(long)]
     model: Option<PathBuf>,
+    /// Threads for the learned model's matrix products (default 1; on a board with cores to
+    /// spare, 2-4 shorten each window's inference: docs/runtime.md).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..=64))]
+    threads: Option<u16>,
     /// Output: udp://HOST:PORT, serial:DEV or serial:DEV@BAUD, tum:FILE (repeatable).
     #[arg(long = "out")]
     out: Vec<String>,
@@ -229,6 +233,12 @@ pub fn run(a: RunArgs) -> Result<()> {
         let p = PathBuf::from("models/compact/model-int8.onnx");
         p.is_file().then_some(p)
     });
+    cfg.model_threads = a
+        .pipe
+        .threads
+        .map(usize::from)
+        .or(file.model_threads)
+        .unwrap_or(1);
     cfg.outputs = if a.pipe.out.is_empty() {
         file.outputs()?
     } else {
@@ -335,10 +345,11 @@ pub fn run(a: RunArgs) -> Result<()> {
     let summary = run_pipeline(&input, &cfg, stop);
     // The run is over: the view publishes what it still holds, then stops.
     cfg.view = None;
+    let view = view.map(|v| v.finish(Duration::from_millis(500)));
+    let mut summary = summary?;
     if let Some(v) = view {
-        v.finish(Duration::from_millis(500));
+        summary.report.view_client_dropped = v.client_dropped;
     }
-    let summary = summary?;
     let text = serde_json::to_string_pretty(&summary.report)?;
     eprintln!("{text}");
     if let Some(p) = a.pipe.summary_json.as_ref().or(file.summary_json.as_ref()) {

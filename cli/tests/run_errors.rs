@@ -57,6 +57,12 @@ fn start_up_errors_are_one_clear_message() {
         &["--imu", dev, "--config", bad.to_str().unwrap()],
         "unknown field `estimatr`",
     );
+    fails_with(&["--imu", dev, "--threads", "0"], "--threads");
+    std::fs::write(&bad, "model_threads = 65\n").unwrap();
+    fails_with(
+        &["--imu", dev, "--config", bad.to_str().unwrap()],
+        "model_threads: 65",
+    );
     std::fs::write(&bad, "[sync]\nstall_periods = 0\n").unwrap();
     fails_with(
         &["--imu", dev, "--config", bad.to_str().unwrap()],

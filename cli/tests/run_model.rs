@@ -16,7 +16,13 @@ fn model(file: &str) -> PathBuf {
         .join(file)
 }
 
-fn run(session: &std::path::Path, estimator: &str, model_file: &str, out: &std::path::Path) {
+fn run(
+    session: &std::path::Path,
+    estimator: &str,
+    model_file: &str,
+    out: &std::path::Path,
+    extra: &[&str],
+) {
     let o = Command::new(BIN)
         .args(["run", "--session"])
         .arg(session)
@@ -24,6 +30,7 @@ fn run(session: &std::path::Path, estimator: &str, model_file: &str, out: &std::
         .arg(model(model_file))
         .arg("--out")
         .arg(format!("tum:{}", out.display()))
+        .args(extra)
         .output()
         .unwrap();
     assert!(
@@ -56,7 +63,7 @@ fn the_model_estimator_runs_offline_and_beats_imu_dead_reckoning() {
     let gt = Trajectory::from_tum(&Session::open(&s).unwrap().groundtruth().unwrap().unwrap());
 
     let model_tum = d.path().join("model.tum");
-    run(&s, "model", "model-int8.onnx", &model_tum);
+    run(&s, "model", "model-int8.onnx", &model_tum, &[]);
     let poses = read_tum(&model_tum).unwrap();
     // 12 s at 20 Hz, one pose per 5-frame keyframe window (the first keyframe is the origin).
     assert!(
@@ -71,7 +78,7 @@ fn the_model_estimator_runs_offline_and_beats_imu_dead_reckoning() {
     );
 
     let imu_tum = d.path().join("imu.tum");
-    run(&s, "imu", "model-int8.onnx", &imu_tum);
+    run(&s, "imu", "model-int8.onnx", &imu_tum, &[]);
     let ate = |p: &std::path::Path| {
         evaluate(
             &gt,
@@ -86,4 +93,19 @@ fn the_model_estimator_runs_offline_and_beats_imu_dead_reckoning() {
     eprintln!("ATE mean: model int8 {m:.3} m, IMU dead reckoning {i:.3} m");
     assert!(m < i / 3.0, "model {m} m vs IMU-only {i} m");
     assert!(m < 2.0, "model ATE {m} m on a 12 s session");
+
+    // The model's matrix products on two threads: the same trajectory, to the last digit.
+    let two_tum = d.path().join("model-2-threads.tum");
+    run(
+        &s,
+        "model",
+        "model-int8.onnx",
+        &two_tum,
+        &["--threads", "2"],
+    );
+    assert_eq!(
+        std::fs::read_to_string(&two_tum).unwrap(),
+        std::fs::read_to_string(&model_tum).unwrap(),
+        "--threads 2 changed the model's poses"
+    );
 }

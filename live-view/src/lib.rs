@@ -18,8 +18,8 @@
 //! | `/ground_truth/pose`, `/ground_truth/trajectory` | as `/pose`, `/trajectory` (sessions with ground truth) | protobuf |
 //!
 //! The server never blocks the runtime: the runtime's hand-off drops and counts what this thread
-//! cannot take, and the SDK keeps a bounded backlog per client (older messages dropped for a
-//! client that does not read).
+//! cannot take, and the front keeps a bounded backlog of channel messages per client (the oldest
+//! dropped and counted, [`ViewCounters::client_dropped`], for a client that does not read).
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -56,8 +56,11 @@ pub const TOPICS: &[&str] = &[
 /// Where the view listens when `--foxglove` names no address: loopback only.
 pub const DEFAULT_ADDR: &str = "127.0.0.1:8765";
 
-/// Messages the SDK queues per client before it drops that client's oldest.
+/// Channel messages queued per client before that client's oldest is dropped.
 pub const DEFAULT_BACKLOG: usize = 4096;
+/// The SDK's own per-client queue: it feeds the front's reader, which never waits for a
+/// client, so it does not fill; drops happen (and are counted) in the front.
+const SDK_BACKLOG: usize = 4 * DEFAULT_BACKLOG;
 
 /// Settings of a live view.
 #[derive(Debug, Clone)]
@@ -183,6 +186,10 @@ pub struct ViewCounters {
     pub poses: u64,
     /// Health messages.
     pub health: u64,
+    /// Channel messages dropped for clients that read too slowly (all clients together).
+    pub client_dropped: u64,
+    /// Client connections served.
+    pub clients: u64,
 }
 
 /// A running live view.
@@ -221,19 +228,20 @@ impl LiveView {
             .name("milliego")
             .context(&ctx)
             .bind("127.0.0.1", 0)
-            .message_backlog_size(opts.backlog)
+            .message_backlog_size(SDK_BACKLOG.max(opts.backlog))
             .start_blocking()
             .map_err(|error| ViewError::Start {
                 addr: want.clone(),
                 error,
             })?;
         let backend = SocketAddr::from(([127, 0, 0, 1], handle.port()));
-        let front = front::Front::start(&opts.host, opts.port, backend).map_err(|error| {
-            ViewError::Bind {
-                addr: want.clone(),
-                error,
-            }
-        })?;
+        let front =
+            front::Front::start(&opts.host, opts.port, backend, opts.backlog).map_err(|error| {
+                ViewError::Bind {
+                    addr: want.clone(),
+                    error,
+                }
+            })?;
         let addr = match front.addr() {
             SocketAddr::V6(a) => format!("[{}]:{}", a.ip(), a.port()),
             SocketAddr::V4(a) => a.to_string(),
@@ -290,7 +298,7 @@ impl LiveView {
     /// clients receive it, then stops the server.
     pub fn finish(mut self, linger: Duration) -> ViewCounters {
         self.finishing.store(true, Ordering::Release);
-        let counters = self
+        let mut counters = self
             .thread
             .take()
             .and_then(|t| t.join().ok())
@@ -299,7 +307,10 @@ impl LiveView {
         if let Some(h) = self.handle.take() {
             h.stop().wait_blocking();
         }
-        self.front.take();
+        if let Some(f) = self.front.take() {
+            counters.client_dropped = f.counters().dropped.load(Ordering::Relaxed);
+            counters.clients = f.counters().clients.load(Ordering::Relaxed);
+        }
         counters
     }
 }

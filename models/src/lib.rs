@@ -176,6 +176,17 @@ impl Model {
     /// must equal it (the runtime passes its own so a model trained differently stops at
     /// start-up).
     pub fn load(path: &Path, expect: Option<&Config>) -> Result<Model, ModelError> {
+        Model::load_with_threads(path, expect, 1)
+    }
+
+    /// [`Model::load`] with tract's matrix products split over `threads` threads (a pool of its
+    /// own, `threads` > 1; 0 is taken as 1). Outputs are the same as with one thread: each thread
+    /// computes whole tiles of the product (`tests/golden.rs` checks it).
+    pub fn load_with_threads(
+        path: &Path,
+        expect: Option<&Config>,
+        threads: usize,
+    ) -> Result<Model, ModelError> {
         let load_err = |e: TractError| ModelError::Load {
             path: path.into(),
             why: format!("{e:#}"),
@@ -245,7 +256,15 @@ impl Model {
                 "outputs {out_shapes:?}, expected [[1, 6], [1, {STATE_ROWS}, {h}]] (pose, state_out)"
             )));
         }
-        let plan = typed.into_runnable().map_err(run_err)?;
+        let plan = if threads > 1 {
+            let opts = tract_onnx::tract_core::runtime::RunOptions {
+                executor: Some(tract_linalg::multithread::Executor::multithread(threads)),
+                ..Default::default()
+            };
+            TypedSimplePlan::new_with_options(typed, &opts).map_err(run_err)?
+        } else {
+            typed.into_runnable().map_err(run_err)?
+        };
         let exec = TypedSimpleState::new(&plan).map_err(run_err)?;
         let zero_state = Tensor::zero::<f32>(&[1, STATE_ROWS, h]).map_err(run_err)?;
         Ok(Model {

@@ -185,3 +185,28 @@ fn tempfile_dir() -> PathBuf {
     std::fs::create_dir_all(&d).unwrap();
     d
 }
+
+#[test]
+fn two_threads_give_the_same_outputs_as_one() {
+    let dir = model_dir();
+    let bytes = std::fs::read(dir.join("golden.safetensors")).expect("golden bundle");
+    let st = SafeTensors::deserialize(&bytes).unwrap();
+    let n = windows(&st);
+    for file in ["model.onnx", "model-int8.onnx"] {
+        let path = dir.join(file);
+        let mut one = Model::load_with_threads(&path, None, 1).unwrap();
+        let mut two = Model::load_with_threads(&path, None, 2).unwrap();
+        for k in 0..n {
+            let radar = f32s(&st, &format!("radar_{k}"));
+            let imu = imu_rows(&f32s(&st, &format!("imu_{k}")));
+            let a = one.step_tensors(&radar, &imu).unwrap();
+            let b = two.step_tensors(&radar, &imu).unwrap();
+            // Whole tiles per thread: the same sums in the same order, bit for bit.
+            assert_eq!(
+                a.map(f32::to_bits),
+                b.map(f32::to_bits),
+                "{file} window {k}: {a:?} vs {b:?}"
+            );
+        }
+    }
+}

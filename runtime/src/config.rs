@@ -14,6 +14,8 @@ pub struct FileConfig {
     pub estimator: Option<EstimatorKind>,
     /// Learned-model file.
     pub model: Option<PathBuf>,
+    /// Threads for the learned model's matrix products (default 1).
+    pub model_threads: Option<usize>,
     /// Outputs: `udp://HOST:PORT`, `serial:DEV[@BAUD]`, `tum:FILE`.
     #[serde(default)]
     pub out: Vec<String>,
@@ -179,6 +181,11 @@ impl FileConfig {
                 }
             }
         }
+        if let Some(n) = self.model_threads {
+            if !(1..=64).contains(&n) {
+                return Err(format!("model_threads: {n} (1 to 64)"));
+            }
+        }
         if let Some(s) = self.sync.stall_periods {
             if !(s >= 1.0 && s.is_finite()) {
                 return Err(format!("sync.stall_periods: {s} (at least 1)"));
@@ -227,6 +234,7 @@ mod tests {
         assert_eq!(c.outputs().unwrap().len(), 2);
         assert!(c.extrinsics.radar.is_some());
         assert_eq!(c.queues.radar, Some(8));
+        assert_eq!(c.model_threads, Some(1));
     }
 
     #[test]
@@ -240,6 +248,8 @@ mod tests {
         assert!(e.0.contains("unknown variant"), "{e}");
         let e = FileConfig::parse("out = [\"udp://nohost\"]", "x.toml").unwrap_err();
         assert!(e.0.contains("udp://HOST:PORT"), "{e}");
+        let e = FileConfig::parse("model_threads = 0", "x.toml").unwrap_err();
+        assert!(e.0.contains("model_threads: 0"), "{e}");
         let e = FileConfig::parse("[sync]\nstall_periods = 0.5", "x.toml").unwrap_err();
         assert!(e.0.contains("sync.stall_periods"), "{e}");
         let e = FileConfig::parse(

@@ -2,7 +2,7 @@
 //! stage -> output, joined by [`DropOldest`] queues; the summary at the end.
 
 pub use crate::error::{PortRole, RunError};
-use crate::estimator::{build_run_estimators, Built, ClassicalConfig, EstimatorKind};
+use crate::estimator::{build_run_estimators, Built, ClassicalConfig, EstimatorKind, ModelSource};
 use crate::output::{Encoded, OutputSpec, Sink};
 use crate::queue::{DropOldest, Pool};
 use crate::reader::{
@@ -73,6 +73,9 @@ pub struct RunConfig {
     pub estimator: EstimatorKind,
     /// Learned-model file.
     pub model: Option<PathBuf>,
+    /// Threads for the learned model's matrix products (1: the estimator thread alone; see
+    /// docs/runtime.md, "Model threads", for the measured scaling).
+    pub model_threads: usize,
     /// Outputs.
     pub outputs: Vec<OutputSpec>,
     /// Publish IMU-propagated poses between radar-rate poses.
@@ -106,6 +109,7 @@ impl Default for RunConfig {
         RunConfig {
             estimator: EstimatorKind::Auto,
             model: None,
+            model_threads: 1,
             outputs: Vec::new(),
             imu_rate_output: false,
             tum_predicted: false,
@@ -293,7 +297,11 @@ impl Plan {
                 }
             }
         }
-        let built = build_run_estimators(cfg.estimator, &cfg.classical, cfg.model.as_deref())?;
+        let model = cfg.model.as_deref().map(|path| ModelSource {
+            path,
+            threads: cfg.model_threads,
+        });
+        let built = build_run_estimators(cfg.estimator, &cfg.classical, model)?;
         if built.model_fallback {
             tracing::warn!("learned model unavailable: auto runs Doppler (MODEL_FALLBACK)");
         }
@@ -1025,6 +1033,7 @@ fn run_summary(e: &RunEnds<'_>, sh: &Shared, c: &InputCounters, latency: &Latenc
             0.0
         },
         view_dropped: sh.view.as_ref().map_or(0, ViewTap::dropped),
+        view_client_dropped: 0,
     }
 }
 

@@ -41,6 +41,11 @@ pub struct RunSummary {
     /// samples, poses and status updates it never showed. The pose path never waits for it.
     #[serde(default)]
     pub view_dropped: u64,
+    /// Channel messages the live view dropped for clients that read too slowly (all clients
+    /// together; each client keeps its newest `--foxglove-backlog` messages). Set by the CLI
+    /// when the view stops; the pose path never waits for a client either.
+    #[serde(default)]
+    pub view_client_dropped: u64,
 }
 
 /// Inputs decoded.

@@ -247,7 +247,12 @@ fn model_to_doppler_handover_continues_the_trajectory() {
     let at = frame_at(&s, 60);
     let built = Built {
         primary: failing(
-            build_estimator(EstimatorKind::Model, &s.classical, Some(&model)).unwrap(),
+            build_estimator(
+                EstimatorKind::Model,
+                &s.classical,
+                Some(model.as_path().into()),
+            )
+            .unwrap(),
             at,
         ),
         fallback: Some(build_estimator(EstimatorKind::Doppler, &s.classical, None).unwrap()),

@@ -51,23 +51,40 @@ impl std::fmt::Debug for Built {
     }
 }
 
+/// The learned model of a run: its file and the threads tract may use for it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ModelSource<'a> {
+    /// The ONNX file.
+    pub path: &'a std::path::Path,
+    /// Threads for the model's matrix products (1: none besides the estimator thread).
+    pub threads: usize,
+}
+
+impl<'a> From<&'a std::path::Path> for ModelSource<'a> {
+    /// One thread.
+    fn from(path: &'a std::path::Path) -> Self {
+        ModelSource { path, threads: 1 }
+    }
+}
+
 /// Builds one estimator of `kind`. The single place where estimators are made: the learned
-/// model joins here (`model_path` is its file).
+/// model joins here (`model` names its file).
 pub fn build_estimator(
     kind: EstimatorKind,
     cfg: &ClassicalConfig,
-    model_path: Option<&std::path::Path>,
+    model: Option<ModelSource<'_>>,
 ) -> Result<Box<dyn Estimator>, BuildError> {
     match kind {
         EstimatorKind::Doppler => Ok(Box::new(Classical::doppler(*cfg))),
         EstimatorKind::Imu => Ok(Box::new(Classical::imu_only(*cfg))),
         EstimatorKind::Model => {
-            let path = model_path.ok_or(BuildError::ModelUnavailable)?;
-            ModelEstimator::load(path, &cfg.mounting).map(|m| Box::new(m) as Box<dyn Estimator>)
+            let m = model.ok_or(BuildError::ModelUnavailable)?;
+            ModelEstimator::load(m.path, &cfg.mounting, m.threads)
+                .map(|m| Box::new(m) as Box<dyn Estimator>)
         }
-        EstimatorKind::Auto => match build_estimator(EstimatorKind::Model, cfg, model_path) {
+        EstimatorKind::Auto => match build_estimator(EstimatorKind::Model, cfg, model) {
             Ok(m) => Ok(m),
-            Err(_) => build_estimator(EstimatorKind::Doppler, cfg, model_path),
+            Err(_) => build_estimator(EstimatorKind::Doppler, cfg, model),
         },
     }
 }
@@ -77,10 +94,10 @@ pub fn build_estimator(
 pub fn build_run_estimators(
     kind: EstimatorKind,
     cfg: &ClassicalConfig,
-    model_path: Option<&std::path::Path>,
+    model: Option<ModelSource<'_>>,
 ) -> Result<Built, BuildError> {
     match kind {
-        EstimatorKind::Auto => match build_estimator(EstimatorKind::Model, cfg, model_path) {
+        EstimatorKind::Auto => match build_estimator(EstimatorKind::Model, cfg, model) {
             Ok(m) => Ok(Built {
                 primary: m,
                 fallback: Some(build_estimator(EstimatorKind::Doppler, cfg, None)?),
@@ -96,7 +113,7 @@ pub fn build_run_estimators(
             Err(e) => Err(e),
         },
         k => Ok(Built {
-            primary: build_estimator(k, cfg, model_path)?,
+            primary: build_estimator(k, cfg, model)?,
             fallback: None,
             model_fallback: false,
         }),

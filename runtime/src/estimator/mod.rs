@@ -16,7 +16,7 @@ pub mod factory;
 pub mod model;
 
 pub use classical::Classical;
-pub use factory::{build_estimator, build_run_estimators, BuildError, Built};
+pub use factory::{build_estimator, build_run_estimators, BuildError, Built, ModelSource};
 pub use milliego_odometry::runner::{ClassicalConfig, Mounting};
 pub use model::ModelEstimator;
 

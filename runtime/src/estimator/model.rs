@@ -42,10 +42,16 @@ impl std::fmt::Debug for ModelEstimator {
 }
 
 impl ModelEstimator {
-    /// Loads `path` (checked against this build's preprocessing) for sensors mounted as `m`.
-    pub fn load(path: &std::path::Path, m: &Mounting) -> Result<ModelEstimator, BuildError> {
+    /// Loads `path` (checked against this build's preprocessing) for sensors mounted as `m`,
+    /// its matrix products on `threads` threads (1: the estimator thread alone).
+    pub fn load(
+        path: &std::path::Path,
+        m: &Mounting,
+        threads: usize,
+    ) -> Result<ModelEstimator, BuildError> {
         let pre = milliego_preprocess::Config::default();
-        let model = Model::load(path, Some(&pre)).map_err(BuildError::BadModel)?;
+        let model =
+            Model::load_with_threads(path, Some(&pre), threads).map_err(BuildError::BadModel)?;
         let builder = WindowBuilder::new(BuilderConfig {
             pre,
             imu_to_body: m.imu.rotation,
