@@ -85,6 +85,24 @@ fn sim(seed: u64) -> Sim {
 /// Replays the session's recorded reads through decoders, synchroniser and a stage running
 /// `built`; the radar-rate poses (frame time \[s\], message) and the stage's counters.
 fn drive(s: &Sim, built: Built) -> (Vec<(f64, PoseMessage)>, StageCounters) {
+    let (poses, c, _) = drive_timed(s, built, 0.0);
+    (poses, c)
+}
+
+/// When a radar-rate pose left the stage.
+#[derive(Debug, Clone, Copy)]
+struct Emitted {
+    /// Time \[s\] of the radar frame being processed then (None: an IMU sample).
+    frame_t: Option<f64>,
+}
+
+/// [`drive`], with when each pose left the stage; radar frames timed `earlier_s` \[s\] earlier
+/// than the session says.
+fn drive_timed(
+    s: &Sim,
+    built: Built,
+    earlier_s: f64,
+) -> (Vec<(f64, PoseMessage)>, StageCounters, Vec<Emitted>) {
     let radar = s.session.radar.as_ref().unwrap();
     let imu = s.session.imu.as_ref().unwrap();
     let (rb, ib) = (radar.read_all().unwrap(), imu.read_all().unwrap());
@@ -101,7 +119,7 @@ fn drive(s: &Sim, built: Built) -> (Vec<(f64, PoseMessage)>, StageCounters) {
     reads.sort_by_key(|r| r.0);
     let mut sync = Synchroniser::new(SyncConfig {
         radar_period_s: Some(s.period_s),
-        half_chirps_s: s.half_chirps_s,
+        half_chirps_s: s.half_chirps_s + earlier_s,
         radar_baud: s.session.meta.radar.as_ref().unwrap().baud,
         imu_baud: s.session.meta.imu.as_ref().unwrap().baud,
         ..SyncConfig::default()
@@ -122,6 +140,7 @@ fn drive(s: &Sim, built: Built) -> (Vec<(f64, PoseMessage)>, StageCounters) {
     let mut idec = ImuDecoder::new(imu_driver::TimeWrap::Pow32);
     let mut events: Vec<SyncOut> = Vec::new();
     let mut poses = Vec::new();
+    let mut emitted = Vec::new();
     for &(host_ns, is_radar, a, b) in &reads {
         let host_s = host_ns as f64 * 1e-9;
         if is_radar {
@@ -135,19 +154,24 @@ fn drive(s: &Sim, built: Built) -> (Vec<(f64, PoseMessage)>, StageCounters) {
         }
         sync.poll(host_s, |ev| events.push(ev));
         for ev in events.drain(..) {
+            let frame_t = match &ev {
+                SyncOut::Radar { item, .. } => item.t,
+                _ => None,
+            };
             stage.process(
                 ev,
                 host_ns,
                 |p| {
                     if !p.msg.health.contains(Health::PREDICTED) {
                         poses.push((p.t, p.msg));
+                        emitted.push(Emitted { frame_t });
                     }
                 },
                 |b| pool.give(b),
             );
         }
     }
-    (poses, stage.counters)
+    (poses, stage.counters, emitted)
 }
 
 fn iso(m: &PoseMessage) -> Isometry3<f64> {
@@ -301,4 +325,39 @@ fn model_to_doppler_handover_continues_the_trajectory() {
     let from_origin = iso(before).translation.vector.norm();
     println!("hand-over at {t1:.2} s: step {step:.3} m (body moved {moved:.3} m), {from_origin:.2} m from the origin");
     assert_attached(&handed, &plain, *t0);
+}
+
+#[test]
+fn a_model_pose_leaves_with_its_own_frame() {
+    let s = sim(33);
+    let model = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/compact/model-int8.onnx");
+    let primary = build_estimator(
+        EstimatorKind::Model,
+        &s.classical,
+        Some(model.as_path().into()),
+    )
+    .unwrap();
+    // The simulator's frames fall on its IMU sample times; 2.5 ms earlier (half the 200 Hz IMU
+    // period, as real clocks fall) a window needs the IMU sample after its frame. The
+    // synchroniser releases a frame right after the first IMU sample at or past its time, so
+    // the window is complete when the frame reaches the model: its pose goes out then, not with
+    // the next frame.
+    let (poses, c, when) = drive_timed(
+        &s,
+        Built {
+            primary,
+            fallback: None,
+            model_fallback: false,
+        },
+        0.0025,
+    );
+    assert!(poses.len() > 30, "{} model poses", poses.len());
+    assert_eq!(c.errors, 0);
+    for ((t, _), e) in poses.iter().zip(&when) {
+        assert_eq!(
+            e.frame_t,
+            Some(*t),
+            "the pose at {t} s left while processing {e:?}"
+        );
+    }
 }

@@ -142,12 +142,22 @@ pub struct Synchroniser {
     pub counters: SyncCounters,
 }
 
+/// Radar stamp pairs before the radar clock counts as synchronised.
+const RADAR_MIN_PAIRS: usize = 4;
+
 impl Synchroniser {
     /// A synchroniser (buffers allocated here).
     pub fn new(cfg: SyncConfig) -> Self {
         Synchroniser {
             cfg,
-            radar_clock: OnlineClock::new(cfg.clock),
+            // The radar sends 10-30 frames a second: 16 pairs would hold the first frames for
+            // up to 1.6 s. With rate fixed at 1 for the first seconds (`min_rate_span_s`), an
+            // offset from the lower envelope of 4 pairs is within the stamps' jitter, and the
+            // fit goes on improving as pairs come.
+            radar_clock: OnlineClock::new(ClockConfig {
+                min_pairs: cfg.clock.min_pairs.min(RADAR_MIN_PAIRS),
+                ..cfg.clock
+            }),
             imu_clock: OnlineClock::new(ClockConfig {
                 refit_every: 10,
                 ..cfg.clock
