@@ -96,8 +96,8 @@ pub struct RunArgs {
     /// With --foxglove: wait up to this many seconds for a client to subscribe before starting.
     #[arg(long, value_name = "S", requires = "foxglove")]
     foxglove_wait: Option<f64>,
-    /// With --foxglove: messages the server queues per client before it drops that client's
-    /// oldest (default 4096).
+    /// With --foxglove: channel messages queued per client before that client's oldest is
+    /// dropped and counted (`view_client_dropped`; default 4096).
     #[arg(long, value_name = "N", requires = "foxglove")]
     foxglove_backlog: Option<usize>,
     /// `milliego view`: pace multiplier of the session.
@@ -124,7 +124,8 @@ pub struct ViewArgs {
     /// Ctrl-C stops); 0 starts at once.
     #[arg(long, value_name = "S")]
     wait: Option<f64>,
-    /// Messages the server queues per client before it drops that client's oldest (default 4096).
+    /// Channel messages queued per client before that client's oldest is dropped and counted
+    /// (`view_client_dropped`; default 4096).
     #[arg(long, value_name = "N")]
     backlog: Option<usize>,
     /// Estimator, model, outputs, summary, logging (as for `run`).
@@ -141,8 +142,8 @@ pub struct PipelineArgs {
     /// Learned-model file.
     #[arg(long)]
     model: Option<PathBuf>,
-    /// Threads for the learned model's matrix products (default 1; on a board with cores to
-    /// spare, 2-4 shorten each window's inference: docs/runtime.md).
+    /// Threads for the learned model's matrix products (default 1: the shipped compact model is
+    /// slower on 2; larger graphs gain about 1.2x on 2, docs/runtime.md "Model threads").
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..=64))]
     threads: Option<u16>,
     /// Output: udp://HOST:PORT, serial:DEV or serial:DEV@BAUD, tum:FILE (repeatable).
