@@ -1,7 +1,8 @@
 //! `milliego demo`: the end-to-end job on a generated default, no hardware and no files needed:
 //! simulate a radar-inertial session, decode both UART streams with the drivers, run Doppler
-//! radar-inertial odometry, the learned milliEgo model (the shipped int8 file, with tract) and IMU
-//! dead reckoning on it, and score them against ground truth.
+//! radar-inertial odometry, the learned milliEgo model (the shipped int8 file, with tract) alone and
+//! fused into the Doppler filter (`milliego run`'s default), and IMU dead reckoning on it, and score
+//! them against ground truth.
 
 use clap::Args;
 use milliego_eval::{evaluate, Settings, Trajectory};
@@ -112,6 +113,19 @@ pub fn run(a: DemoArgs) -> Result<()> {
         let path = out.join("model.tum");
         write_tum(&path, &r.trajectory)?;
         print_row(name, &gt, &r.trajectory)?;
+        let name = "fused (milliego run)";
+        eprintln!(
+            "2/3 {name}: the runtime's default, the model's motion inside the Doppler filter"
+        );
+        let (poses, _, _) = crate::score::run_runtime(
+            &session_dir,
+            milliego_runtime::estimator::EstimatorKind::Auto,
+            &a.model,
+            milliego_odometry::learned::LearnedConfig::default(),
+            false,
+        )?;
+        write_tum(&out.join("auto.tum"), &poses)?;
+        print_row(name, &gt, &poses)?;
     } else {
         eprintln!("skipped the learned model: {} not found", a.model.display());
     }

@@ -16,13 +16,17 @@ type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum EstimatorArg {
-    /// The learned milliEgo model.
+    /// The learned milliEgo model alone (the paper's network).
     Model,
     /// Doppler radar-inertial odometry.
     Doppler,
     /// IMU dead reckoning.
     Imu,
-    /// The model when available, else Doppler (flagged model_fallback).
+    /// Doppler with the model's relative motion as a gated measurement (every one within the
+    /// gate applied).
+    Fused,
+    /// With a model: fused until its learned measurements fail the online consistency check,
+    /// then Doppler (a hand-over); without one: Doppler (flagged model_fallback).
     Auto,
 }
 
@@ -224,6 +228,7 @@ pub fn run(a: RunArgs) -> Result<()> {
             Some(EstimatorArg::Model) => EstimatorKind::Model,
             Some(EstimatorArg::Doppler) => EstimatorKind::Doppler,
             Some(EstimatorArg::Imu) => EstimatorKind::Imu,
+            Some(EstimatorArg::Fused) => EstimatorKind::Fused,
             Some(EstimatorArg::Auto) => EstimatorKind::Auto,
             None => file.estimator.unwrap_or(EstimatorKind::Auto),
         },

@@ -1,19 +1,27 @@
 //! `milliego score`: every estimator on a set of the simulator's benchmark split, one table (ATE
 //! 3D/2D mean, std, max as in the paper's tables, and drift as % of path): IMU-only dead
-//! reckoning, Doppler radar-inertial odometry and the learned model (each `--model` file, fp32 or
-//! int8, run with tract exactly as the runtime runs it).
+//! reckoning, Doppler radar-inertial odometry, the learned model (each `--model` file, fp32 or
+//! int8, run with tract exactly as the runtime runs it), and per model the fused estimator and
+//! `auto` (run by the runtime itself, `milliego run --session` as fast as it goes).
 
 use clap::Args;
 use milliego_eval::{evaluate, Settings, Stats, Trajectory};
 use milliego_models::offline::run_session;
 use milliego_models::Model;
+use milliego_odometry::learned::LearnedConfig;
 use milliego_odometry::offline::{run as run_offline, Estimator, OfflineConfig};
+use milliego_runtime::estimator::EstimatorKind;
+use milliego_runtime::output::OutputSpec;
+use milliego_runtime::pipeline::{run as run_pipeline, Input, RunConfig};
+use milliego_runtime::summary::LearnedSummary;
 use milliego_session::Session;
 use milliego_sim::motion::MotionKind;
 use milliego_sim::scenario::run as simulate;
 use milliego_sim::split::{Set, SplitVersion};
 use serde_json::json;
 use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
@@ -45,12 +53,76 @@ pub struct ScoreArgs {
     /// Score only the classical estimators.
     #[arg(long)]
     no_model: bool,
+    /// Leave out the fused and auto rows (the model alone only).
+    #[arg(long)]
+    no_fused: bool,
+    /// The learned measurements' absolute deviation per axis and keyframe interval \[m\]
+    /// (default: the shipped setting, docs/model.md "Fusion").
+    #[arg(long, value_name = "M")]
+    learned_base_std: Option<f64>,
+    /// The learned measurements' deviation per metre moved (default: the shipped setting).
+    #[arg(long, value_name = "K")]
+    learned_scale_std: Option<f64>,
+    /// `auto`'s online check: the largest mean NIS over its window (default: the shipped
+    /// setting).
+    #[arg(long, value_name = "X")]
+    learned_nis_max: Option<f64>,
+    /// `auto`'s online check: the largest share of its window beyond the gate.
+    #[arg(long, value_name = "F")]
+    learned_gated_max: Option<f64>,
+    /// `auto`'s online check: measurements it looks back over.
+    #[arg(long, value_name = "N")]
+    learned_window: Option<usize>,
+    /// Skip a learned measurement when this many radar updates were applied over its interval
+    /// (0: never).
+    #[arg(long, value_name = "N")]
+    learned_doppler_covers: Option<u64>,
+    /// Calibrate the network's scale online against the filter where the radar covers an
+    /// interval: on or off (default: the shipped setting).
+    #[arg(long, value_name = "on|off")]
+    learned_scale: Option<String>,
 }
 
 /// One column of the table.
 enum Column {
     Classical(Estimator),
     Model(Box<Model>),
+    /// The runtime with this estimator and model file.
+    Runtime(EstimatorKind, PathBuf),
+}
+
+/// Runs the runtime over the session in `dir` with `kind` and `model` (as fast as it goes) and
+/// returns its radar-rate poses, the learned measurements' report and the hand-overs.
+pub(crate) fn run_runtime(
+    dir: &std::path::Path,
+    kind: EstimatorKind,
+    model: &std::path::Path,
+    learned: LearnedConfig,
+    vehicle: bool,
+) -> Result<(Vec<milliego_session::TumPose>, Option<LearnedSummary>, u64)> {
+    let tum = std::env::temp_dir().join(format!(
+        "milliego-score-{}-{}.tum",
+        std::process::id(),
+        kind.name()
+    ));
+    let mut cfg = RunConfig {
+        estimator: kind,
+        model: Some(model.to_path_buf()),
+        outputs: vec![OutputSpec::Tum(tum.clone())],
+        ..RunConfig::default()
+    };
+    cfg.classical.learned = learned;
+    if vehicle {
+        cfg.classical.rio.nonholonomic_std = milliego_odometry::offline::GROUND_VEHICLE_STD;
+    }
+    let input = Input::Session {
+        dir: dir.to_path_buf(),
+        realtime: false,
+    };
+    let s = run_pipeline(&input, &cfg, Arc::new(AtomicBool::new(false)))?;
+    let poses = milliego_session::read_tum(&tum);
+    let _ = std::fs::remove_file(&tum);
+    Ok((poses?, s.report.learned, s.report.frames_out.handovers))
 }
 
 fn default_models() -> Vec<PathBuf> {
@@ -106,8 +178,48 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             m.meta().precision,
             if m.meta().trained { "" } else { " (UNTRAINED)" }
         );
+        let runtime = !a.no_fused;
+        let label = name.trim_start_matches("milliEgo ").to_string();
         estimators.push((name, Column::Model(Box::new(m))));
+        if runtime {
+            estimators.push((
+                format!("fused ({label})"),
+                Column::Runtime(EstimatorKind::Fused, path.clone()),
+            ));
+            estimators.push((
+                format!("auto ({label})"),
+                Column::Runtime(EstimatorKind::Auto, path.clone()),
+            ));
+        }
     }
+    let mut learned = LearnedConfig::default();
+    if let Some(b) = a.learned_base_std {
+        learned.base_std_m = b;
+    }
+    if let Some(k) = a.learned_scale_std {
+        learned.scale_std = k;
+    }
+    if let Some(x) = a.learned_nis_max {
+        learned.nis_max = x;
+    }
+    if let Some(f) = a.learned_gated_max {
+        learned.gated_max = f;
+    }
+    if let Some(v) = &a.learned_scale {
+        learned.calibrate_scale = match v.as_str() {
+            "on" => true,
+            "off" => false,
+            o => return Err(format!("--learned-scale: {o:?} is neither on nor off").into()),
+        };
+    }
+    if let Some(n) = a.learned_doppler_covers {
+        learned.doppler_covers = n;
+    }
+    if let Some(n) = a.learned_window {
+        learned.window = n.max(1);
+    }
+    // Per runtime column: learned measurements applied, evaluated, NIS sum; sessions handed over.
+    let mut learned_use: Vec<(u64, u64, f64, usize)> = vec![(0, 0, 0.0, 0); estimators.len()];
     let mut per: Vec<(String, Vec<SessionScore>)> = estimators
         .iter()
         .map(|(n, _)| (n.clone(), Vec::new()))
@@ -132,7 +244,8 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             return Err(stale(&dir, &s.meta.description, e).into());
         }
         let gt = Trajectory::from_tum(&s.groundtruth()?.ok_or("no ground truth")?);
-        for ((_, est), (_, out)) in estimators.iter_mut().zip(per.iter_mut()) {
+        let vehicle = e.scenario().motion == MotionKind::Vehicle;
+        for (k, ((_, est), (_, out))) in estimators.iter_mut().zip(per.iter_mut()).enumerate() {
             let trajectory = match est {
                 Column::Classical(est) => {
                     let cfg = OfflineConfig {
@@ -140,14 +253,22 @@ pub fn run(a: ScoreArgs) -> Result<()> {
                         ..OfflineConfig::default()
                     };
                     // What the rig's operator knows and says (`odometry --vehicle`): a car.
-                    let cfg = if e.scenario().motion == MotionKind::Vehicle {
-                        cfg.ground_vehicle()
-                    } else {
-                        cfg
-                    };
+                    let cfg = if vehicle { cfg.ground_vehicle() } else { cfg };
                     run_offline(&s, &cfg)?.trajectory
                 }
                 Column::Model(m) => run_session(m, &s)?.trajectory,
+                Column::Runtime(kind, path) => {
+                    let (poses, rep, handovers) = run_runtime(&dir, *kind, path, learned, vehicle)?;
+                    learned_use[k].3 += usize::from(handovers > 0);
+                    if let Some(r) = rep {
+                        let n = r.applied + r.gated + r.suspended;
+                        let u = &mut learned_use[k];
+                        u.0 += r.applied;
+                        u.1 += n;
+                        u.2 += r.nis_mean.unwrap_or(0.0) * n as f64;
+                    }
+                    poses
+                }
             };
             let rep = evaluate(
                 &gt,
@@ -198,6 +319,15 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             "{name:<30} {:>7.2}/{:>6.2}/{:>7.2} {:>7.2}/{:>6.2}/{:>7.2} {:>10.2}",
             a3.mean, a3.std, a3.max, a2.mean, a2.std, a2.max, d.mean
         );
+    }
+    for ((name, v), (applied, n, nis, handed)) in per.iter().zip(&learned_use) {
+        if *n > 0 {
+            println!(
+                "{name}: learned measurements applied {applied} of {n} evaluated, mean NIS {:.2} (3 when their deviation is right); handed over to Doppler in {handed} of {} sessions",
+                nis / *n as f64,
+                v.len()
+            );
+        }
     }
     Ok(())
 }

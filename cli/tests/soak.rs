@@ -1,5 +1,5 @@
-//! Soak: `milliego run --session` with every estimator (the model as fp32 and int8, Doppler, IMU,
-//! and the default `auto`) over generated sessions of every family and motion, unseen seeds
+//! Soak: `milliego run --session` with every estimator (the model as fp32 and int8, fused,
+//! Doppler, IMU, and the default `auto`) over generated sessions of every family and motion, unseen seeds
 //! among them the ones that once crashed the default path (tract's AMX over-read,
 //! docs/amx-overread.md). Every run must exit 0 (a crash is a failed run, never a skip), give a
 //! pose per expected radar frame, account for every frame, and write only finite values.
@@ -93,8 +93,9 @@ fn every_estimator_runs_every_session_to_the_end() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(8.0);
     let d = tempfile::tempdir().unwrap();
-    let runs: [(&str, Option<&str>); 5] = [
+    let runs: [(&str, Option<&str>); 6] = [
         ("auto", None),
+        ("fused", Some("model-int8.onnx")),
         ("model", Some("model-int8.onnx")),
         ("model", Some("model.onnx")),
         ("doppler", None),
@@ -109,7 +110,8 @@ fn every_estimator_runs_every_session_to_the_end() {
             .unwrap()
             .0
             .len() as u64;
-        let mut model_poses = None;
+        // `auto`'s poses when it never handed over: then it ran the fused estimator throughout.
+        let mut auto_fused = None;
         for (estimator, file) in runs {
             let tag = format!(
                 "{family} {motion} {seed} {estimator} {}",
@@ -128,10 +130,10 @@ fn every_estimator_runs_every_session_to_the_end() {
             assert_eq!(j["drops"]["total"].as_u64(), Some(0), "{tag}: {j}");
             // Every radar frame either gave a pose or is counted as giving none.
             assert_eq!(radar_rate + no_pose, radar_in, "{tag}: {fo}");
-            // A pose per expected frame: per frame after the 1 s levelling for the filters, per
-            // 5-frame keyframe window for the model (20 Hz radar).
+            // A pose per expected frame: per frame after the 1 s levelling for the filters (fused
+            // and auto included), per 5-frame keyframe window for the model (20 Hz radar).
             let expected = match estimator {
-                "model" | "auto" => (frames.saturating_sub(10)) / 5,
+                "model" => (frames.saturating_sub(10)) / 5,
                 _ => frames.saturating_sub(25),
             };
             assert!(
@@ -139,20 +141,30 @@ fn every_estimator_runs_every_session_to_the_end() {
                 "{tag}: {radar_rate} poses for {frames} frames (expected at least {expected})"
             );
             assert_eq!(fo["resets"].as_u64(), Some(1), "{tag}: one origin only");
-            // `auto` runs the shipped int8 model unless it hands over (runs come in that order).
+            // `auto` runs the fused estimator with the shipped int8 model and hands over to
+            // Doppler only when the learned measurements fail the online check (runs come in
+            // that order).
             let h = fo["handovers"].as_u64().unwrap();
             handovers += h;
+            let poses = read_tum(&out).unwrap();
+            let learned = &j["learned"];
             match (estimator, file) {
-                ("auto", _) if h == 0 => model_poses = Some(radar_rate),
-                ("auto", _) => {}
-                ("model", Some("model-int8.onnx")) => {
-                    if let Some(auto) = model_poses {
-                        assert_eq!(auto, radar_rate, "{tag}: auto ran the int8 model");
+                ("auto", _) => {
+                    assert_eq!(learned["switched_off"].as_bool(), Some(h > 0), "{tag}: {j}");
+                    assert!(learned["model_windows"].as_u64() > Some(0), "{tag}: {j}");
+                    if h == 0 {
+                        auto_fused = Some(poses.clone());
+                    }
+                }
+                ("fused", _) => {
+                    assert_eq!(h, 0, "{tag}: fused hands over to nothing");
+                    assert_eq!(learned["switched_off"].as_bool(), Some(false), "{tag}: {j}");
+                    if let Some(a) = &auto_fused {
+                        assert_eq!(a, &poses, "{tag}: auto ran the fused estimator");
                     }
                 }
                 _ => assert_eq!(h, 0, "{tag}: hand-over in a fixed estimator"),
             }
-            let poses = read_tum(&out).unwrap();
             assert_eq!(poses.len() as u64, radar_rate, "{tag}");
             assert!(
                 poses

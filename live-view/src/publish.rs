@@ -149,6 +149,7 @@ fn estimator_name(e: Estimator) -> String {
         Estimator::Model => "model".into(),
         Estimator::Doppler => "doppler".into(),
         Estimator::Imu => "imu".into(),
+        Estimator::Fused => "fused".into(),
         Estimator::Unknown(n) => format!("unknown({n})"),
     }
 }

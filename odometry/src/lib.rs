@@ -6,6 +6,8 @@
 //!   covariance, and degenerate geometry reported rather than silently wrong.
 //! * [`rio`]: the error-state Kalman filter that fuses both (IMU propagation, radar velocity
 //!   updates, bias estimation, chi-square gating).
+//! * [`learned`]: the learned model's relative motion as a filter measurement, and the online
+//!   consistency check that decides whether it is applied.
 //! * [`rest`]: rest detection from the IMU and the radar's Doppler together, and the zero-velocity
 //!   / zero-rate updates taken at rest.
 //! * [`runner`]: the streaming loop over both (levelling, priors, the health rule, updates, IMU
@@ -17,6 +19,7 @@
 #![warn(missing_docs)]
 
 pub mod ego_velocity;
+pub mod learned;
 pub mod offline;
 pub mod rest;
 pub mod rio;

@@ -174,6 +174,8 @@ pub struct OfflineResult {
     /// `t` was taken at `t + offset`), when it was estimated ([`OfflineConfig::time_offset`]),
     /// and why.
     pub time_offset: Option<(f64, f64, String)>,
+    /// What became of the learned motions given to [`run_with_motions`] (zero otherwise).
+    pub learned: crate::learned::LearnedCounters,
 }
 
 /// Why a run could not start.
@@ -206,6 +208,19 @@ impl From<SessionError> for OfflineError {
 /// radar frame just before the first IMU sample at or past its time). Frames before the first
 /// or after the last IMU sample get no pose.
 pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, OfflineError> {
+    run_with_motions(session, cfg, &[], crate::learned::LearnedConfig::default())
+}
+
+/// [`run`] with relative motions between radar frames from elsewhere (a learned model run
+/// offline, another odometry) as measurements ([`crate::learned`], settings `learned`): each is
+/// given as soon as the pose of its `to` frame came out (frame times on the session clock, as in
+/// [`OfflineResult::trajectory`]; sorted by `t_to`).
+pub fn run_with_motions(
+    session: &Session,
+    cfg: &OfflineConfig,
+    motions: &[crate::learned::RelativeMotion],
+    learned: crate::learned::LearnedConfig,
+) -> Result<OfflineResult, OfflineError> {
     let (frames, radar_rep) = radar_frames(session)?;
     let (imu, baro, imu_rep) = imu_and_pressure(session)?;
     if imu.is_empty() {
@@ -254,6 +269,7 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
             mounting: Mounting::from_session(&session.meta.extrinsics),
             // Offline, both streams are complete: no radar-only dead reckoning.
             imu_gap_s: f64::INFINITY,
+            learned,
         },
         cfg.estimator == Estimator::Doppler,
     );
@@ -264,6 +280,7 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
         .collect();
     radar_times.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut trajectory = Vec::with_capacity(radar_times.len());
+    let mut next_motion = 0;
     let mut drain = |runner: &mut Runner| {
         while let Some(p) = runner.pop_pose() {
             let q = p.body.rotation;
@@ -272,6 +289,10 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
                 p: p.body.translation.vector.into(),
                 q: [q.i, q.j, q.k, q.w],
             });
+            while next_motion < motions.len() && motions[next_motion].t_to <= p.t + 1e-3 {
+                runner.push_relative_motion(&motions[next_motion]);
+                next_motion += 1;
+            }
         }
     };
     let mut next = 0;
@@ -337,5 +358,6 @@ pub fn run(session: &Session, cfg: &OfflineConfig) -> Result<OfflineResult, Offl
             .and_then(|f| f.time_offset())
             .zip(offset_why)
             .map(|((o, sd), why)| (o, sd, why)),
+        learned: *runner.learned_counters(),
     })
 }

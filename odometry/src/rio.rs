@@ -740,6 +740,28 @@ impl Rio {
         self.nis_sum += d2;
     }
 
+    /// Normalised innovation square of a world-velocity innovation `y` \[m/s\] with measurement
+    /// covariance `rm` (Jacobian: identity on the velocity error), `None` when its innovation
+    /// covariance is singular ([`crate::learned`]).
+    pub fn world_velocity_nis(&self, y: &Vector3<f64>, rm: &Matrix3<f64>) -> Option<f64> {
+        let s = self.p.fixed_view::<3, 3>(3, 3) + rm;
+        let si = s.try_inverse()?;
+        let d2 = (y.transpose() * si * y)[(0, 0)];
+        d2.is_finite().then_some(d2)
+    }
+
+    /// Applies a world-velocity innovation `y` \[m/s\] with covariance `rm` (heading kept out of
+    /// the gain unless [`RioConfig::radar_heading`]); see [`crate::learned`].
+    pub fn world_velocity_update(&mut self, y: &Vector3<f64>, rm: &Matrix3<f64>) {
+        let mut h = M3xN::zeros();
+        h.fixed_view_mut::<3, 3>(0, 3)
+            .copy_from(&Matrix3::identity());
+        let s = h * self.p * h.transpose() + rm;
+        if let Some(si) = s.try_inverse() {
+            self.correct(y, &h, rm, &si, !self.cfg.radar_heading);
+        }
+    }
+
     /// Zero-velocity pseudo-measurement: the body is at rest, its world velocity zero with
     /// standard deviation `std` \[m/s\] per axis (see [`crate::rest`]).
     pub fn zero_velocity(&mut self, std: f64) {

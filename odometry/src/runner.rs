@@ -28,10 +28,14 @@
 use crate::ego_velocity::{
     Config as EgoConfig, Detection, EgoVelocityEstimator, Estimate, Prior, Status,
 };
+use crate::learned::{
+    LearnedConfig, LearnedCounters, Monitor, Outcome, RelativeMotion, ScaleCalibration,
+    SCALE_COVERS,
+};
 use crate::rest::{RestConfig, RestDetector, Verdict};
 use crate::rio::{RadarMount, Rio, RioConfig, RioCounters, VelocityMeasurement};
 use crate::strapdown::{ImuSample, NavState};
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use radar_driver::tlv::Point;
 use std::collections::VecDeque;
 
@@ -47,6 +51,12 @@ pub const LEVEL_CAPACITY: usize = 4096;
 
 /// Radar frames kept while levelling at most (later ones get no pose).
 pub const EARLY_CAPACITY: usize = 256;
+
+/// Frame poses kept for learned measurements ([`Runner::push_relative_motion`]): 3.2 s at 20 Hz.
+pub const ANCHOR_CAPACITY: usize = 64;
+
+/// Largest difference between a learned measurement's keyframe time and a frame pose's \[s\].
+const ANCHOR_TOLERANCE_S: f64 = 1e-3;
 
 /// The health rule: whether a filter with `updates` applied radar updates (and rest updates, which
 /// pin the velocity as well) and `rejected_in_row` frames rejected in a row may guide the next
@@ -117,6 +127,9 @@ pub struct ClassicalConfig {
     /// its ego-velocity alone and the filter restarts when the IMU returns \[s\]
     /// (`f64::INFINITY`: never).
     pub imu_gap_s: f64,
+    /// Learned relative motions as measurements ([`crate::learned`]; only the fused estimators
+    /// give any).
+    pub learned: LearnedConfig,
 }
 
 impl Default for ClassicalConfig {
@@ -129,6 +142,7 @@ impl Default for ClassicalConfig {
             mounting: Mounting::default(),
             rest: RestConfig::default(),
             imu_gap_s: 0.1,
+            learned: LearnedConfig::default(),
         }
     }
 }
@@ -233,6 +247,12 @@ pub struct Runner {
     waiting: VecDeque<(u64, f64)>,
     out: VecDeque<FramePose>,
     counters: RunnerCounters,
+    // Recent frame poses (time, body pose, radar updates applied so far), for learned
+    // measurements.
+    anchors: VecDeque<(f64, Isometry3<f64>, u64)>,
+    monitor: Monitor,
+    learned: LearnedCounters,
+    scale: ScaleCalibration,
 }
 
 impl Runner {
@@ -269,6 +289,10 @@ impl Runner {
             waiting: VecDeque::with_capacity(64),
             out: VecDeque::with_capacity(EARLY_CAPACITY + 64),
             counters: RunnerCounters::default(),
+            anchors: VecDeque::with_capacity(ANCHOR_CAPACITY),
+            monitor: Monitor::new(cfg.learned),
+            learned: LearnedCounters::default(),
+            scale: ScaleCalibration::default(),
         }
     }
 
@@ -442,6 +466,101 @@ impl Runner {
         }
     }
 
+    /// Counters of the learned measurements ([`Runner::push_relative_motion`]).
+    pub fn learned_counters(&self) -> &LearnedCounters {
+        &self.learned
+    }
+
+    /// The network's scale as calibrated against the filter (1 when not calibrated).
+    pub fn learned_scale(&self) -> f64 {
+        if self.cfg.learned.calibrate_scale {
+            self.scale.scale()
+        } else {
+            1.0
+        }
+    }
+
+    /// Whether learned measurements are applied (the online check has not failed, or is off).
+    pub fn learned_trusted(&self) -> bool {
+        self.monitor.trusted()
+    }
+
+    /// A learned relative motion between two radar frames whose poses this runner gave (their
+    /// times within 1 ms): gated, checked online and applied as described in [`crate::learned`].
+    /// Give it right after the `to` frame's pose came out (at most one radar period later).
+    pub fn push_relative_motion(&mut self, m: &RelativeMotion) -> Outcome {
+        let o = self.relative_motion(m);
+        self.learned.count(o);
+        o
+    }
+
+    fn relative_motion(&mut self, m: &RelativeMotion) -> Outcome {
+        let dt = m.t_to - m.t_from;
+        let d = Vector3::from(m.translation);
+        if !(dt > 1e-3 && d.iter().all(|x| x.is_finite())) {
+            return Outcome::Invalid;
+        }
+        let find = |t: f64| {
+            self.anchors
+                .iter()
+                .rev()
+                .find(|(ta, _, _)| (ta - t).abs() <= ANCHOR_TOLERANCE_S)
+                .map(|(_, b, u)| (*b, *u))
+        };
+        let (Some((from, u_from)), Some((to, u_to))) = (find(m.t_from), find(m.t_to)) else {
+            return Outcome::NoAnchor;
+        };
+        let c = self.cfg.learned;
+        if c.doppler_covers > 0 && u_to.saturating_sub(u_from) >= c.doppler_covers {
+            return Outcome::Covered;
+        }
+        if self.dr.is_some() {
+            return Outcome::NoAnchor;
+        }
+        let Some(rio) = self.rio.as_mut() else {
+            return Outcome::NoAnchor;
+        };
+        // At rest, or the IMU still while the filter's velocity is zero within its uncertainty
+        // (a rest the radar cannot confirm: too few points for a zero-Doppler verdict). A network
+        // trained on simulation "walked" on a real rig standing still.
+        let still =
+            self.rest.was_still(false) && rio.at_rest_consistent(self.cfg.rest.zero_velocity_std);
+        if self.rest.resting() || still {
+            return Outcome::AtRest;
+        }
+        let r_from = from.rotation.to_rotation_matrix().into_inner();
+        let moved = to.translation.vector - from.translation.vector;
+        let d = if c.calibrate_scale {
+            // The factor learned from earlier intervals; then this one joins it if the radar
+            // covered it.
+            let k = self.scale.scale();
+            if u_to.saturating_sub(u_from) >= SCALE_COVERS {
+                self.scale.push(&d, &(r_from.transpose() * moved));
+            }
+            d * k
+        } else {
+            d
+        };
+        let v_learned = r_from * d / dt;
+        let v_filter = moved / dt;
+        let y = v_learned - v_filter;
+        let s = c.base_std_m.hypot(c.scale_std * d.norm()) / dt;
+        let rm = r_from * Matrix3::from_diagonal_element(s * s) * r_from.transpose();
+        let Some(nis) = rio.world_velocity_nis(&y, &rm) else {
+            return Outcome::Invalid;
+        };
+        let trusted = self.monitor.trusted();
+        self.learned.switched_off += u64::from(self.monitor.record(nis));
+        if nis > c.gate {
+            return Outcome::Gated(nis);
+        }
+        if !trusted {
+            return Outcome::Suspended(nis);
+        }
+        rio.world_velocity_update(&y, &rm);
+        Outcome::Applied(nis)
+    }
+
     /// The end of the stream: a filter still levelling starts now (over every sample seen), and
     /// the poses of the frames seen while levelling come out.
     pub fn finish(&mut self) {
@@ -459,6 +578,11 @@ impl Runner {
 
     fn emit(&mut self, id: u64, t: f64) {
         if let Some((_, body, velocity_world)) = self.body_state() {
+            if self.anchors.len() == ANCHOR_CAPACITY {
+                self.anchors.pop_front();
+            }
+            let updates = self.rio.as_ref().map_or(0, |r| r.counters().updates);
+            self.anchors.push_back((t, body, updates));
             self.out.push_back(FramePose {
                 id,
                 t,

@@ -46,6 +46,8 @@ static const char *estimator_name(uint8_t e) {
         return "doppler";
     case POSE_LINK_ESTIMATOR_IMU:
         return "imu";
+    case POSE_LINK_ESTIMATOR_FUSED:
+        return "fused";
     default:
         return "unknown";
     }

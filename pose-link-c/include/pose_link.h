@@ -57,6 +57,10 @@
 // Estimator code: IMU dead reckoning.
 #define POSE_LINK_ESTIMATOR_IMU 2
 
+// Estimator code: Doppler radar-inertial odometry with the learned model's motion as a
+// measurement.
+#define POSE_LINK_ESTIMATOR_FUSED 3
+
 // What a call did. Zero is success; the names of the message errors are those of
 // `pose_link::DecodeError` (see `pose_link_status_name`).
 enum PoseLinkStatus

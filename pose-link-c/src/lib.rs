@@ -82,6 +82,9 @@ pub const POSE_LINK_ESTIMATOR_MODEL: u8 = 0;
 pub const POSE_LINK_ESTIMATOR_DOPPLER: u8 = 1;
 /// Estimator code: IMU dead reckoning.
 pub const POSE_LINK_ESTIMATOR_IMU: u8 = 2;
+/// Estimator code: Doppler radar-inertial odometry with the learned model's motion as a
+/// measurement.
+pub const POSE_LINK_ESTIMATOR_FUSED: u8 = 3;
 
 // The literals above are what cbindgen can put in the header; they must equal the Rust crate's.
 const _: () = {

@@ -93,6 +93,8 @@ pub enum Estimator {
     Doppler,
     /// IMU-only dead reckoning.
     Imu,
+    /// Doppler radar-inertial odometry with the network's relative motion as a measurement.
+    Fused,
     /// A value this decoder does not know (sent by a newer encoder).
     Unknown(u8),
 }
@@ -104,6 +106,7 @@ impl Estimator {
             Estimator::Model => 0,
             Estimator::Doppler => 1,
             Estimator::Imu => 2,
+            Estimator::Fused => 3,
             Estimator::Unknown(c) => c,
         }
     }
@@ -113,6 +116,7 @@ impl Estimator {
             0 => Estimator::Model,
             1 => Estimator::Doppler,
             2 => Estimator::Imu,
+            3 => Estimator::Fused,
             c => Estimator::Unknown(c),
         }
     }
@@ -122,6 +126,7 @@ impl Estimator {
             Estimator::Model => "model",
             Estimator::Doppler => "doppler",
             Estimator::Imu => "imu",
+            Estimator::Fused => "fused",
             Estimator::Unknown(_) => "unknown",
         }
     }

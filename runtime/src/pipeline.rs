@@ -436,7 +436,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
     let (h_sync, sync_counters, clocks) = sync_thread
         .join()
         .map_err(|_| RunError::Panicked { thread: "sync" })?;
-    let (h_est, stage_counters, radar_time_offset, mut view_handoff) = stage_thread
+    let (h_est, stage_counters, stage_ends, mut view_handoff) = stage_thread
         .join()
         .map_err(|_| RunError::Panicked { thread: "estimate" })?;
     let out = out_thread
@@ -459,7 +459,8 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         sync: sync_counters,
         clocks,
         stage: stage_counters,
-        radar_time_offset,
+        radar_time_offset: stage_ends.radar_time_offset,
+        learned: stage_ends.learned,
         out: &out,
         radar_report: session_radar_report.as_ref(),
     };
@@ -731,7 +732,7 @@ fn spawn_sync(
 
 /// What the estimator stage hands back: its latency histogram, its counters, the radar time
 /// offset its estimators estimated (estimate, deviation \[s\]) and its view hand-off times.
-type StageEnd = (Histogram, StageCounters, Option<(f64, f64)>, Histogram);
+type StageEnd = (Histogram, StageCounters, StageEnds, Histogram);
 
 /// The estimator thread: events -> poses (live, a full pose queue drops its oldest).
 fn spawn_stage(
@@ -793,8 +794,11 @@ fn spawn_stage(
             }
         }
         sh2.stage_done.store(true, Ordering::Release);
-        let offset = stage.radar_time_offset();
-        (hist, stage.counters, offset, handoff)
+        let ends = StageEnds {
+            radar_time_offset: stage.radar_time_offset(),
+            learned: stage.learned(),
+        };
+        (hist, stage.counters, ends, handoff)
     })
 }
 
@@ -925,6 +929,12 @@ fn view_status(sh: &Shared, c: &InputCounters, v: &ViewTap) -> ViewStatus {
     }
 }
 
+/// What the estimator stage knows at the end of a run beyond its counters.
+struct StageEnds {
+    radar_time_offset: Option<(f64, f64)>,
+    learned: Option<crate::summary::LearnedSummary>,
+}
+
 /// What the stages reported at the end of a run.
 struct RunEnds<'a> {
     estimator: EstimatorKind,
@@ -934,6 +944,7 @@ struct RunEnds<'a> {
     clocks: Clocks,
     stage: StageCounters,
     radar_time_offset: Option<(f64, f64)>,
+    learned: Option<crate::summary::LearnedSummary>,
     out: &'a OutputEnd,
     radar_report: Option<&'a StreamReport>,
 }
@@ -968,7 +979,10 @@ fn run_summary(e: &RunEnds<'_>, sh: &Shared, c: &InputCounters, latency: &Latenc
         },
         barometer: if load(&c.decoded[2]) == 0 {
             "none: height from the radar and the IMU only".into()
-        } else if e.estimator.name() == "doppler" {
+        } else if matches!(
+            e.estimator,
+            EstimatorKind::Doppler | EstimatorKind::Fused | EstimatorKind::Auto
+        ) {
             format!("{} readings aid the height", load(&c.decoded[2]))
         } else {
             format!(
@@ -1034,6 +1048,7 @@ fn run_summary(e: &RunEnds<'_>, sh: &Shared, c: &InputCounters, latency: &Latenc
         },
         view_dropped: sh.view.as_ref().map_or(0, ViewTap::dropped),
         view_client_dropped: 0,
+        learned: e.learned.clone(),
     }
 }
 

@@ -110,6 +110,11 @@ impl Stage {
         })
     }
 
+    /// What became of the learned measurements (the fused estimator only).
+    pub fn learned(&self) -> Option<crate::summary::LearnedSummary> {
+        self.built.primary.learned()
+    }
+
     /// A stage running `built`.
     pub fn new(cfg: StageConfig, built: Built) -> Self {
         Stage {
@@ -148,6 +153,7 @@ impl Stage {
         }
         match name {
             "model" => Code::Model,
+            "fused" => Code::Fused,
             "imu" => Code::Imu,
             _ => Code::Doppler,
         }

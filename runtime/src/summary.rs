@@ -46,6 +46,43 @@ pub struct RunSummary {
     /// when the view stops; the pose path never waits for a client either.
     #[serde(default)]
     pub view_client_dropped: u64,
+    /// The learned model's measurements in the fused estimator (`auto` with a model, `fused`);
+    /// absent for the other estimators.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub learned: Option<LearnedSummary>,
+}
+
+/// What became of the learned model's relative motions in the fused estimator
+/// (docs/model.md, "Fusion"). Every evaluated one has a normalised innovation square (NIS).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct LearnedSummary {
+    /// Applied to the filter.
+    pub applied: u64,
+    /// Beyond the chi-square gate (not applied).
+    pub gated: u64,
+    /// Within the gate but not applied: the recent ones failed the online check (`auto`).
+    pub suspended: u64,
+    /// Skipped at rest (the zero-velocity update stands in).
+    pub at_rest: u64,
+    /// Skipped where the radar updated the filter over the whole interval (off by default).
+    #[serde(default)]
+    pub covered: u64,
+    /// Without a filter pose at one of their keyframes (start-up, IMU gaps).
+    pub no_anchor: u64,
+    /// Not usable (not finite, no interval).
+    pub invalid: u64,
+    /// Mean NIS of the evaluated ones (3 when their stated uncertainty is right).
+    pub nis_mean: Option<f64>,
+    /// Whether the online check switched them off (`auto` then handed over to Doppler).
+    pub switched_off: bool,
+    /// Whether they were being applied when the run ended.
+    pub in_use_at_end: bool,
+    /// Windows the model ran on.
+    pub model_windows: u64,
+    /// Model failures (inference errors, outputs that are not a finite pose).
+    pub model_failures: u64,
+    /// Why the model was switched off, if it was (the Doppler filter went on alone).
+    pub model_off: Option<String>,
 }
 
 /// Inputs decoded.

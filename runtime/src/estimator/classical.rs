@@ -39,6 +39,11 @@ impl Classical {
         &self.runner
     }
 
+    /// The runner, to give it measurements of its own (the fused estimator's learned motions).
+    pub(crate) fn runner_mut(&mut self) -> &mut Runner {
+        &mut self.runner
+    }
+
     /// The filter, once levelled.
     pub fn filter(&self) -> Option<&Rio> {
         self.runner.filter()

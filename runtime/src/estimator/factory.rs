@@ -1,7 +1,7 @@
-//! The one place estimators are built: the classical ones, the learned model, and for `auto` the
-//! pair of them (model first, Doppler beside it as the fallback).
+//! The one place estimators are built: the classical ones, the learned model, the fused estimator,
+//! and for `auto` the fused one with its online check (or Doppler when no model is given).
 
-use super::{Classical, ClassicalConfig, Estimator, EstimatorKind, ModelEstimator};
+use super::{Classical, ClassicalConfig, Estimator, EstimatorKind, Fused, ModelEstimator};
 
 /// Why an estimator could not be built.
 #[derive(Debug)]
@@ -82,29 +82,42 @@ pub fn build_estimator(
             ModelEstimator::load(m.path, &cfg.mounting, m.threads)
                 .map(|m| Box::new(m) as Box<dyn Estimator>)
         }
-        EstimatorKind::Auto => match build_estimator(EstimatorKind::Model, cfg, model) {
-            Ok(m) => Ok(m),
-            Err(_) => build_estimator(EstimatorKind::Doppler, cfg, model),
+        EstimatorKind::Fused => {
+            let m = model.ok_or(BuildError::ModelUnavailable)?;
+            let mut cfg = *cfg;
+            cfg.learned.monitor = false;
+            Ok(Box::new(Fused::load(&cfg, m)?))
+        }
+        EstimatorKind::Auto => match model {
+            Some(m) => {
+                let mut cfg = *cfg;
+                cfg.learned.monitor = true;
+                Ok(Box::new(Fused::load(&cfg, m)?))
+            }
+            None => build_estimator(EstimatorKind::Doppler, cfg, None),
         },
     }
 }
 
-/// The estimators for a run of `kind`: `auto` tries the model and falls back to Doppler
-/// (MODEL_FALLBACK on every pose) when it is unavailable; a fixed kind fails at start-up.
+/// The estimators for a run of `kind`: `auto` runs the fused estimator with its online check
+/// when a model is given (Doppler beside it, taking over when the check fails), Doppler
+/// (MODEL_FALLBACK on every pose) when none is; a model that is
+/// given but cannot be loaded, or a fixed kind that cannot be built, fails at start-up.
 pub fn build_run_estimators(
     kind: EstimatorKind,
     cfg: &ClassicalConfig,
     model: Option<ModelSource<'_>>,
 ) -> Result<Built, BuildError> {
     match kind {
-        EstimatorKind::Auto => match build_estimator(EstimatorKind::Model, cfg, model) {
-            Ok(m) => Ok(Built {
+        EstimatorKind::Auto => match build_estimator(EstimatorKind::Auto, cfg, model) {
+            // The Doppler filter beside it takes over when the online check fails.
+            Ok(m) if model.is_some() => Ok(Built {
                 primary: m,
                 fallback: Some(build_estimator(EstimatorKind::Doppler, cfg, None)?),
                 model_fallback: false,
             }),
-            Err(BuildError::ModelUnavailable) => Ok(Built {
-                primary: build_estimator(EstimatorKind::Doppler, cfg, None)?,
+            Ok(doppler) => Ok(Built {
+                primary: doppler,
                 fallback: None,
                 model_fallback: true,
             }),

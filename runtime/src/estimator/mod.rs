@@ -4,6 +4,8 @@
 //! * [`classical`]: `doppler` (radar ego-velocity fused with the IMU) and `imu` (the same
 //!   integration, no radar updates) over [`milliego_odometry::runner::Runner`], the loop
 //!   `milliego odometry` runs offline;
+//! * [`fused`]: the Doppler filter with the learned model's relative motion as a measurement
+//!   (`auto` when a model is given, with its online consistency check; `fused` without it);
 //! * [`model`]: the learned model over [`milliego_models::chain::KeyframeChain`], the chain
 //!   `milliego score` runs offline;
 //! * [`factory`]: the one place estimators are built ([`build_estimator`],
@@ -13,10 +15,12 @@
 
 pub mod classical;
 pub mod factory;
+pub mod fused;
 pub mod model;
 
 pub use classical::Classical;
 pub use factory::{build_estimator, build_run_estimators, BuildError, Built, ModelSource};
+pub use fused::Fused;
 pub use milliego_odometry::runner::{ClassicalConfig, Mounting};
 pub use model::ModelEstimator;
 
@@ -109,20 +113,28 @@ pub trait Estimator: Send {
     fn radar_time_offset(&self) -> Option<(f64, f64)> {
         None
     }
+    /// What became of the learned model's measurements (the fused estimator only).
+    fn learned(&self) -> Option<crate::summary::LearnedSummary> {
+        None
+    }
 }
 
 /// Which estimator a run uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum EstimatorKind {
-    /// The learned milliEgo model.
+    /// The learned milliEgo model alone (the paper's network).
     Model,
+    /// The Doppler filter with the learned model's relative motion as a gated measurement,
+    /// every one that passes its gate applied.
+    Fused,
     /// Doppler radar-inertial odometry.
     Doppler,
     /// IMU dead reckoning.
     Imu,
-    /// The model when available and healthy, else Doppler; IMU propagation while radar is
-    /// missing.
+    /// With a model: the fused estimator until its learned measurements fail the online
+    /// consistency check, then Doppler (hand-over); without one: Doppler. IMU propagation while
+    /// radar is missing.
     Auto,
 }
 
@@ -131,6 +143,7 @@ impl EstimatorKind {
     pub fn name(self) -> &'static str {
         match self {
             EstimatorKind::Model => "model",
+            EstimatorKind::Fused => "fused",
             EstimatorKind::Doppler => "doppler",
             EstimatorKind::Imu => "imu",
             EstimatorKind::Auto => "auto",

@@ -1,0 +1,333 @@
+//! A learned relative motion (the milliEgo network's translation between two radar keyframes) as a
+//! measurement of the radar-inertial filter, and the online check that decides whether to apply
+//! such measurements at all.
+//!
+//! # Measurement
+//!
+//! The network says where the body at keyframe `to` is in the body frame at keyframe `from`
+//! (translation `d` \[m\], over `dt = t_to - t_from` \[s\]). The filter keeps its body poses at
+//! the radar frames ([`crate::runner::Runner`]), so both sides are mean world velocities over the
+//! same interval:
+//!
+//! * learned: `v_m = R_wb(from) d / dt` (the filter's attitude at `from`);
+//! * filter: `v_f = (p(to) - p(from)) / dt` (its own positions at the two keyframes).
+//!
+//! The innovation `v_m - v_f` is applied to the current velocity (Jacobian: identity on the
+//! velocity error): the measurement comes at most one radar period after `to` and the filter's
+//! velocity error changes slowly. Its covariance is `R_wb(from) diag(s^2) R_wb(from)^T / dt^2`
+//! with the per-axis deviation `s = hypot(base_std_m, scale_std * |d|)` (an absolute part and a
+//! part growing with the distance, the network's error being mostly one of scale). Heading stays
+//! out of the gain as for radar updates ([`crate::rio::RioConfig::radar_heading`]).
+//!
+//! # Online consistency ([`Monitor`])
+//!
+//! Every measurement's normalised innovation square (NIS, 3 dof) is computed whether or not it is
+//! applied. With the monitor on, measurements are applied until a window of
+//! [`LearnedConfig::window`] of them is inconsistent: mean NIS over [`LearnedConfig::nis_max`]
+//! or more than [`LearnedConfig::gated_max`] of them beyond the gate. Then they are off for good,
+//! and the runtime's `auto` hands over to the Doppler filter it ran beside (the trajectory goes
+//! on from the last pose: no new origin).
+
+use std::collections::VecDeque;
+
+/// Settings of the learned measurements.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LearnedConfig {
+    /// Absolute part of the per-axis translation deviation over one keyframe interval \[m\].
+    pub base_std_m: f64,
+    /// Part of the per-axis deviation proportional to the distance moved (unitless).
+    pub scale_std: f64,
+    /// Chi-square gate (3 dof; 16.27 = 99.9%).
+    pub gate: f64,
+    /// Apply only while the recent measurements are consistent ([`Monitor`]).
+    pub monitor: bool,
+    /// Measurements the consistency check looks back over.
+    pub window: usize,
+    /// Largest mean NIS over the window (3 when consistent).
+    pub nis_max: f64,
+    /// Largest share of the window beyond the gate.
+    pub gated_max: f64,
+    /// Skip a measurement when the filter applied at least this many radar updates over its
+    /// interval (the radar already saw the motion; 0: never skip).
+    pub doppler_covers: u64,
+    /// Calibrate the network's scale online against the filter: over intervals where the filter
+    /// applied at least [`SCALE_COVERS`] radar updates, the least-squares factor between the
+    /// network's translation and the filter's (exponentially forgotten, [`SCALE_FORGET`]);
+    /// every measurement is scaled by it (within [`SCALE_RANGE`]).
+    pub calibrate_scale: bool,
+}
+
+/// Radar updates over an interval for it to calibrate the scale ([`LearnedConfig::calibrate_scale`]).
+pub const SCALE_COVERS: u64 = 4;
+/// Forgetting factor of the scale calibration per interval (0.98: ~50 intervals, 12 s at 4 Hz).
+pub const SCALE_FORGET: f64 = 0.98;
+/// Squared distance \[m^2\] the calibration must have seen before it applies.
+pub const SCALE_MIN_SUM_M2: f64 = 0.2;
+/// The calibrated scale is kept within this range.
+pub const SCALE_RANGE: (f64, f64) = (0.5, 2.0);
+
+/// The online scale calibration ([`LearnedConfig::calibrate_scale`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ScaleCalibration {
+    num: f64,
+    den: f64,
+}
+
+impl ScaleCalibration {
+    /// The factor to apply now (1 until enough distance was seen).
+    pub fn scale(&self) -> f64 {
+        if self.den < SCALE_MIN_SUM_M2 || !(self.num / self.den).is_finite() {
+            return 1.0;
+        }
+        (self.num / self.den).clamp(SCALE_RANGE.0, SCALE_RANGE.1)
+    }
+
+    /// One interval: the network's translation `learned` and the filter's `filter` (same frame).
+    pub fn push(&mut self, learned: &nalgebra::Vector3<f64>, filter: &nalgebra::Vector3<f64>) {
+        self.num = SCALE_FORGET * self.num + learned.dot(filter);
+        self.den = SCALE_FORGET * self.den + learned.norm_squared();
+    }
+}
+
+impl Default for LearnedConfig {
+    fn default() -> Self {
+        LearnedConfig {
+            // Chosen on the validation set of the benchmark split (docs/model.md, "Fusion").
+            base_std_m: 0.09,
+            scale_std: 0.3,
+            gate: 16.27,
+            monitor: true,
+            window: 40,
+            nis_max: 6.0,
+            gated_max: 0.2,
+            doppler_covers: 0,
+            calibrate_scale: true,
+        }
+    }
+}
+
+/// A learned relative motion between two radar keyframes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RelativeMotion {
+    /// Time of the `from` keyframe (a radar frame's time on the IMU clock) \[s\].
+    pub t_from: f64,
+    /// Time of the `to` keyframe \[s\].
+    pub t_to: f64,
+    /// Body position at `to` in the body frame at `from` \[m\].
+    pub translation: [f64; 3],
+}
+
+/// What became of one learned measurement.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Outcome {
+    /// Applied; its NIS.
+    Applied(f64),
+    /// Beyond the chi-square gate; its NIS.
+    Gated(f64),
+    /// Within the gate but not applied: the online check failed earlier; its NIS.
+    Suspended(f64),
+    /// The body was at rest (the zero-velocity update stands in).
+    AtRest,
+    /// The radar updated the filter over the whole interval ([`LearnedConfig::doppler_covers`]).
+    Covered,
+    /// The filter has no pose at one of the keyframes (not started yet, or too long ago).
+    NoAnchor,
+    /// Not a usable measurement (interval not positive, values not finite).
+    Invalid,
+}
+
+/// Counters of the learned measurements.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LearnedCounters {
+    /// Measurements applied.
+    pub applied: u64,
+    /// Beyond the gate.
+    pub gated: u64,
+    /// Not applied because the online check had failed.
+    pub suspended: u64,
+    /// Skipped at rest.
+    pub at_rest: u64,
+    /// Skipped where the radar covered the interval.
+    pub covered: u64,
+    /// Without a filter pose at one keyframe.
+    pub no_anchor: u64,
+    /// Not usable.
+    pub invalid: u64,
+    /// Sum of the NIS of every evaluated measurement (applied, gated, suspended).
+    pub nis_sum: f64,
+    /// 1 once the online check switched the measurements off (for good).
+    pub switched_off: u64,
+}
+
+impl LearnedCounters {
+    /// Counts an outcome.
+    pub fn count(&mut self, o: Outcome) {
+        match o {
+            Outcome::Applied(d) => {
+                self.applied += 1;
+                self.nis_sum += d;
+            }
+            Outcome::Gated(d) => {
+                self.gated += 1;
+                self.nis_sum += d;
+            }
+            Outcome::Suspended(d) => {
+                self.suspended += 1;
+                self.nis_sum += d;
+            }
+            Outcome::AtRest => self.at_rest += 1,
+            Outcome::Covered => self.covered += 1,
+            Outcome::NoAnchor => self.no_anchor += 1,
+            Outcome::Invalid => self.invalid += 1,
+        }
+    }
+
+    /// Mean NIS of the evaluated measurements (3 when their deviation is right).
+    pub fn nis_mean(&self) -> Option<f64> {
+        let n = self.applied + self.gated + self.suspended;
+        (n > 0).then(|| self.nis_sum / n as f64)
+    }
+}
+
+/// The online consistency check over the recent measurements' NIS: once a full window of them
+/// is inconsistent, the measurements are off for good (the runtime's `auto` then hands over to a
+/// Doppler filter that never took one; switching back and forth would apply a learned velocity
+/// to a filter that drifted away from it meanwhile, and measured worse than either).
+#[derive(Debug, Clone)]
+pub struct Monitor {
+    cfg: LearnedConfig,
+    recent: VecDeque<f64>,
+    failed: bool,
+}
+
+impl Monitor {
+    /// A check with `cfg`'s window (none when [`LearnedConfig::monitor`] is off).
+    pub fn new(cfg: LearnedConfig) -> Monitor {
+        Monitor {
+            cfg,
+            recent: VecDeque::with_capacity(cfg.window.max(1)),
+            failed: false,
+        }
+    }
+
+    /// Whether measurements are applied: until the check fails.
+    pub fn trusted(&self) -> bool {
+        !self.failed
+    }
+
+    /// Records one evaluated measurement's NIS; returns true when this made the check fail.
+    pub fn record(&mut self, nis: f64) -> bool {
+        if !self.cfg.monitor || self.failed {
+            return false;
+        }
+        let w = self.cfg.window.max(1);
+        if self.recent.len() == w {
+            self.recent.pop_front();
+        }
+        // A non-finite NIS counts as far beyond the gate.
+        self.recent
+            .push_back(if nis.is_finite() { nis } else { f64::MAX });
+        self.failed = self.recent.len() == w && !self.consistent();
+        self.failed
+    }
+
+    fn consistent(&self) -> bool {
+        let n = self.recent.len() as f64;
+        // Each term capped at twice the gate: one wild value must not decide alone.
+        let cap = 2.0 * self.cfg.gate;
+        let mean = self.recent.iter().map(|d| d.min(cap)).sum::<f64>() / n;
+        let beyond = self.recent.iter().filter(|d| **d > self.cfg.gate).count() as f64;
+        mean <= self.cfg.nis_max && beyond <= self.cfg.gated_max * n
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg() -> LearnedConfig {
+        LearnedConfig {
+            window: 5,
+            ..LearnedConfig::default()
+        }
+    }
+
+    #[test]
+    fn a_full_inconsistent_window_switches_off_for_good() {
+        let mut m = Monitor::new(cfg());
+        // Inconsistent from the start, but the window is not full yet.
+        for _ in 0..4 {
+            assert!(!m.record(100.0));
+            assert!(m.trusted());
+        }
+        assert!(m.record(100.0));
+        assert!(!m.trusted());
+        for _ in 0..10 {
+            assert!(!m.record(1.0));
+        }
+        assert!(!m.trusted(), "no way back");
+    }
+
+    #[test]
+    fn the_mean_and_the_share_beyond_the_gate_both_count() {
+        // The mean of 2, 2, 2, 2 and 100 (capped at 32.5) is 8.1: over the default 6.
+        let mut m = Monitor::new(cfg());
+        for _ in 0..5 {
+            m.record(2.0);
+        }
+        assert!(m.record(100.0));
+        let mut m = Monitor::new(LearnedConfig {
+            nis_max: 10.0,
+            ..cfg()
+        });
+        for _ in 0..5 {
+            m.record(2.0);
+        }
+        assert!(!m.record(100.0));
+        assert!(m.trusted(), "one of five beyond the gate, mean 8.1 <= 10");
+        assert!(m.record(100.0));
+        assert!(!m.trusted(), "two of five beyond the gate");
+    }
+
+    #[test]
+    fn a_high_mean_without_gated_values_is_inconsistent() {
+        let mut m = Monitor::new(cfg());
+        for _ in 0..4 {
+            m.record(9.0);
+        }
+        assert!(m.record(9.0));
+        assert!(!m.trusted());
+        let mut m = Monitor::new(cfg());
+        for _ in 0..4 {
+            m.record(1.0);
+        }
+        assert!(m.record(f64::NAN), "a non-finite NIS is beyond the gate");
+    }
+
+    #[test]
+    fn without_the_monitor_everything_is_trusted() {
+        let mut m = Monitor::new(LearnedConfig {
+            monitor: false,
+            ..cfg()
+        });
+        assert!(m.trusted());
+        assert!(!m.record(1e9));
+        assert!(m.trusted());
+    }
+
+    #[test]
+    fn counters_average_the_evaluated_measurements_only() {
+        let mut c = LearnedCounters::default();
+        assert_eq!(c.nis_mean(), None);
+        c.count(Outcome::Applied(2.0));
+        c.count(Outcome::Gated(20.0));
+        c.count(Outcome::Suspended(5.0));
+        c.count(Outcome::AtRest);
+        c.count(Outcome::NoAnchor);
+        assert_eq!(
+            (c.applied, c.gated, c.suspended, c.at_rest, c.no_anchor),
+            (1, 1, 1, 1, 1)
+        );
+        assert_eq!(c.nis_mean(), Some(9.0));
+    }
+}

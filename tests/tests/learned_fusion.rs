@@ -1,0 +1,202 @@
+//! Learned relative motions as measurements of the classical filter
+//! (`milliego_odometry::learned`), end to end on simulated sessions: motions taken from the
+//! ground truth stand in for a perfect network, reversed ones for a network out of its domain.
+//! What the network itself adds is scored by `milliego score` (docs/model.md, "Fusion").
+
+use milliego_eval::{evaluate, Settings, Trajectory};
+use milliego_odometry::learned::{LearnedConfig, RelativeMotion};
+use milliego_odometry::offline::{run, run_with_motions, Estimator, OfflineConfig, OfflineResult};
+use milliego_session::{Session, TumPose};
+use milliego_sim::motion::MotionKind;
+use milliego_sim::scenario::{run as simulate, Scenario};
+use milliego_sim::world::Family;
+use nalgebra::{UnitQuaternion, Vector3};
+
+fn simulated(
+    family: Family,
+    motion: MotionKind,
+    seed: u64,
+    s: f64,
+) -> (tempfile::TempDir, Session) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut sc = Scenario::new(family, motion, seed);
+    sc.duration_s = s;
+    simulate(&sc, dir.path(), &mut |_| {}).expect("simulate");
+    let session = Session::open(dir.path()).unwrap();
+    (dir, session)
+}
+
+fn ate(s: &Session, r: &OfflineResult) -> f64 {
+    let gt = Trajectory::from_tum(&s.groundtruth().unwrap().expect("ground truth"));
+    evaluate(
+        &gt,
+        &Trajectory::from_tum(&r.trajectory),
+        &Settings::default(),
+    )
+    .expect("evaluation")
+    .ate
+    .mean
+}
+
+/// The ground-truth pose at `t` (position interpolated, rotation of the nearer sample).
+fn gt_at(gt: &[TumPose], t: f64) -> (Vector3<f64>, UnitQuaternion<f64>) {
+    let i = gt.partition_point(|p| p.t < t).clamp(1, gt.len() - 1);
+    let (a, b) = (&gt[i - 1], &gt[i]);
+    let w = ((t - a.t) / (b.t - a.t)).clamp(0.0, 1.0);
+    let p = Vector3::from(a.p) * (1.0 - w) + Vector3::from(b.p) * w;
+    let n = if w < 0.5 { a } else { b };
+    let [x, y, z, qw] = n.q;
+    let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(qw, x, y, z));
+    (p, q)
+}
+
+/// Motions between every 5th pose of `times` from the ground truth, their translation times
+/// `scale`.
+fn motions(s: &Session, times: &[f64], scale: f64) -> Vec<RelativeMotion> {
+    let gt = s.groundtruth().unwrap().expect("ground truth");
+    times
+        .iter()
+        .step_by(5)
+        .collect::<Vec<_>>()
+        .windows(2)
+        .map(|w| {
+            let (p0, q0) = gt_at(&gt, *w[0]);
+            let (p1, _) = gt_at(&gt, *w[1]);
+            let d = q0.inverse() * (p1 - p0) * scale;
+            RelativeMotion {
+                t_from: *w[0],
+                t_to: *w[1],
+                translation: d.into(),
+            }
+        })
+        .collect()
+}
+
+fn with(
+    s: &Session,
+    est: Estimator,
+    m: &[RelativeMotion],
+    learned: LearnedConfig,
+) -> OfflineResult {
+    let cfg = OfflineConfig {
+        estimator: est,
+        ..OfflineConfig::default()
+    };
+    run_with_motions(s, &cfg, m, learned).expect("offline run")
+}
+
+#[test]
+fn right_motions_carry_an_imu_without_radar_and_do_not_hurt_doppler() {
+    let (_d, s) = simulated(Family::Office, MotionKind::Handheld, 3, 20.0);
+    let doppler = run(&s, &OfflineConfig::default()).unwrap();
+    let times: Vec<f64> = doppler.trajectory.iter().map(|p| p.t).collect();
+    let m = motions(&s, &times, 1.0);
+    let learned = LearnedConfig::default();
+    let imu = with(&s, Estimator::ImuOnly, &[], learned);
+    let imu_m = with(&s, Estimator::ImuOnly, &m, learned);
+    let dop_m = with(&s, Estimator::Doppler, &m, learned);
+    let (a_imu, a_imu_m, a_dop, a_dop_m) = (
+        ate(&s, &imu),
+        ate(&s, &imu_m),
+        ate(&s, &doppler),
+        ate(&s, &dop_m),
+    );
+    println!(
+        "ATE: IMU {a_imu:.2} m, IMU + motions {a_imu_m:.3} m, Doppler {a_dop:.3} m, Doppler + motions {a_dop_m:.3} m; {:?}",
+        dop_m.learned
+    );
+    assert_eq!(imu.learned.applied, 0);
+    assert!(
+        imu_m.learned.applied as usize > m.len() / 2,
+        "{:?}",
+        imu_m.learned
+    );
+    assert!(a_imu_m * 4.0 < a_imu, "motions alone bound the IMU's drift");
+    assert!(
+        a_dop_m <= a_dop * 1.05,
+        "right motions must not make Doppler worse"
+    );
+    let nis = dop_m.learned.nis_mean().unwrap();
+    assert!(
+        nis < 3.0,
+        "right motions are within their stated deviation (NIS {nis:.2})"
+    );
+    assert_eq!(dop_m.learned.switched_off, 0);
+}
+
+#[test]
+fn reversed_motions_fail_the_online_check_and_stop() {
+    let (_d, s) = simulated(Family::Corridor, MotionKind::Handheld, 5, 20.0);
+    let doppler = run(&s, &OfflineConfig::default()).unwrap();
+    let times: Vec<f64> = doppler.trajectory.iter().map(|p| p.t).collect();
+    // A network fed the wrong axis convention (a rig mounted backwards): every motion reversed.
+    // (Twice the distance passes the check: the deviation grows with the distance, and with
+    // Doppler outweighing them such motions cost nothing here.)
+    let m = motions(&s, &times, -1.0);
+    let on = with(&s, Estimator::Doppler, &m, LearnedConfig::default());
+    let off = with(
+        &s,
+        Estimator::Doppler,
+        &m,
+        LearnedConfig {
+            monitor: false,
+            ..LearnedConfig::default()
+        },
+    );
+    let (a_dop, a_on, a_off) = (ate(&s, &doppler), ate(&s, &on), ate(&s, &off));
+    println!(
+        "ATE: Doppler {a_dop:.3} m, with reversed motions checked {a_on:.3} m ({:?}), unchecked {a_off:.3} m ({:?})",
+        on.learned, off.learned
+    );
+    assert_eq!(on.learned.switched_off, 1, "{:?}", on.learned);
+    assert!(on.learned.suspended > 0, "{:?}", on.learned);
+    assert_eq!(off.learned.switched_off + off.learned.suspended, 0);
+    assert!(
+        off.learned.nis_mean().unwrap() > 4.0,
+        "the bias shows in the innovations"
+    );
+    assert!(
+        a_on <= a_dop * 1.1,
+        "Doppler {a_dop:.3} m, checked {a_on:.3} m"
+    );
+    assert!(a_on < a_off, "checked {a_on:.3} m, unchecked {a_off:.3} m");
+}
+
+#[test]
+fn at_rest_motions_are_not_applied_and_the_rig_does_not_move() {
+    let (_d, s) = simulated(Family::Office, MotionKind::Static, 21, 12.0);
+    let doppler = run(&s, &OfflineConfig::default()).unwrap();
+    let times: Vec<f64> = doppler.trajectory.iter().map(|p| p.t).collect();
+    // A network that "walks" at rest (what the simulation-trained one did on a real rig):
+    // 5 cm forward per keyframe.
+    let m: Vec<RelativeMotion> = times
+        .iter()
+        .step_by(5)
+        .collect::<Vec<_>>()
+        .windows(2)
+        .map(|w| RelativeMotion {
+            t_from: *w[0],
+            t_to: *w[1],
+            translation: [0.05, 0.0, 0.0],
+        })
+        .collect();
+    let r = with(&s, Estimator::Doppler, &m, LearnedConfig::default());
+    let first = r.trajectory.first().unwrap().p;
+    let wander = r
+        .trajectory
+        .iter()
+        .map(|p| (Vector3::from(p.p) - Vector3::from(first)).norm())
+        .fold(0.0, f64::max);
+    println!(
+        "static {:.1} s: wander {:.2} mm, {:?}",
+        times.last().unwrap() - times[0],
+        wander * 1e3,
+        r.learned
+    );
+    assert!(
+        r.learned.at_rest as usize * 10 >= m.len() * 8,
+        "{:?}",
+        r.learned
+    );
+    assert!(wander < 0.01, "moved {wander:.4} m at rest");
+}
