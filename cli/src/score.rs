@@ -180,7 +180,14 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         );
         let runtime = !a.no_fused;
         let label = name.trim_start_matches("milliEgo ").to_string();
-        estimators.push((name, Column::Model(Box::new(m))));
+        // The same network with its radar input zeroed: what the radar adds to it.
+        let mut ablated = Model::load(path, Some(&milliego_preprocess::Config::default()))?;
+        ablated.set_radar_zeroed(true);
+        estimators.push((name.clone(), Column::Model(Box::new(m))));
+        estimators.push((
+            format!("{name}, radar zeroed"),
+            Column::Model(Box::new(ablated)),
+        ));
         if runtime {
             estimators.push((
                 format!("fused ({label})"),
@@ -310,13 +317,13 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         set.name()
     );
     println!(
-        "{:<30} {:>22} {:>22} {:>10}",
+        "{:<36} {:>22} {:>22} {:>10}",
         "estimator", "ATE 3D mean/std/max", "ATE 2D mean/std/max", "drift %"
     );
     for (name, v) in &per {
         let (a3, a2, d) = summarise(v);
         println!(
-            "{name:<30} {:>7.2}/{:>6.2}/{:>7.2} {:>7.2}/{:>6.2}/{:>7.2} {:>10.2}",
+            "{name:<36} {:>7.2}/{:>6.2}/{:>7.2} {:>7.2}/{:>6.2}/{:>7.2} {:>10.2}",
             a3.mean, a3.std, a3.max, a2.mean, a2.std, a2.max, d.mean
         );
     }

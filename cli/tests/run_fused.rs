@@ -7,26 +7,13 @@ use milliego_session::{read_tum, Session};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+mod common;
+use common::simulate;
+
 const BIN: &str = env!("CARGO_BIN_EXE_milliego");
 
 fn model() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/compact/model-int8.onnx")
-}
-
-fn simulate(dir: &Path, family: &str, motion: &str, seed: u64, duration: f64) {
-    let o = Command::new(BIN)
-        .args(["sim", "--family", family, "--motion", motion])
-        .args([
-            "--seed",
-            &seed.to_string(),
-            "--duration",
-            &duration.to_string(),
-        ])
-        .arg("-o")
-        .arg(dir)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
 /// Runs `estimator` (None: the default) over `session`; the poses and the summary.

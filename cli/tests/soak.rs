@@ -11,6 +11,9 @@ use milliego_session::{read_tum, Session};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+mod common;
+use common::simulate;
+
 const BIN: &str = env!("CARGO_BIN_EXE_milliego");
 
 /// (family, motion, seed): all five families, the three moving rigs, seeds of the benchmark's
@@ -36,26 +39,6 @@ fn model(file: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../models/compact")
         .join(file)
-}
-
-fn simulate(dir: &Path, family: &str, motion: &str, seed: u64, duration: f64) {
-    let o = Command::new(BIN)
-        .args(["sim", "--family", family, "--motion", motion])
-        .args([
-            "--seed",
-            &seed.to_string(),
-            "--duration",
-            &duration.to_string(),
-        ])
-        .arg("-o")
-        .arg(dir)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "sim {family} {motion} {seed}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
 }
 
 /// One run; its summary JSON. Panics (the test fails) on any non-zero exit, a signal included.

@@ -121,6 +121,8 @@ pub struct Model {
     radar: Box<[f32; RADAR_LEN]>,
     steps: u64,
     prepared: milliego_accel::Prepared,
+    /// Radar input zeroed (the ablation `milliego score` reports).
+    radar_zeroed: bool,
 }
 
 /// The values of an f32 tensor, in order.
@@ -274,6 +276,7 @@ impl Model {
             zero_state,
             exec,
             radar: Box::new([0.0; RADAR_LEN]),
+            radar_zeroed: false,
             steps: 0,
             prepared,
         })
@@ -310,9 +313,19 @@ impl Model {
         self.state = self.zero_state.clone();
     }
 
+    /// Feeds zeros instead of the radar images from now on (`true`): the ablation that shows
+    /// what the radar adds to the network (`milliego score`'s "radar zeroed" rows).
+    pub fn set_radar_zeroed(&mut self, zeroed: bool) {
+        self.radar_zeroed = zeroed;
+    }
+
     /// One window: returns the relative pose `[tx, ty, tz, roll, pitch, yaw]`.
     pub fn step(&mut self, w: &Window<'_>) -> Result<[f32; 6], ModelError> {
-        w.radar_tensor(&self.meta.norm, &mut self.radar);
+        if self.radar_zeroed {
+            self.radar.fill(0.0);
+        } else {
+            w.radar_tensor(&self.meta.norm, &mut self.radar);
+        }
         let radar = self.tensor(&[1, 6, 64, 256], &self.radar[..])?;
         let imu = self.imu_tensor(w.imu)?;
         self.step_with(radar, imu)

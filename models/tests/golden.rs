@@ -210,3 +210,39 @@ fn two_threads_give_the_same_outputs_as_one() {
         }
     }
 }
+
+#[test]
+fn radar_zeroed_feeds_zeros_instead_of_the_images() {
+    let dir = model_dir();
+    let bytes = std::fs::read(dir.join("golden.safetensors")).expect("golden bundle");
+    let st = SafeTensors::deserialize(&bytes).unwrap();
+    let prev: [f32; PANO_LEN] = f32s(&st, "panorama_prev_0").try_into().unwrap();
+    let cur: [f32; PANO_LEN] = f32s(&st, "panorama_cur_0").try_into().unwrap();
+    let imu = imu_rows(&f32s(&st, "imu_0"));
+    let w = milliego_preprocess::window::Window {
+        prev_seq: 0,
+        cur_seq: 5,
+        prev_frame: 0,
+        cur_frame: 5,
+        t_prev: 0.0,
+        t_cur: 0.25,
+        prev: &prev,
+        cur: &cur,
+        imu: &imu,
+    };
+    let mut m = Model::load(&dir.join("model.onnx"), None).unwrap();
+    let with_radar = m.step(&w).unwrap();
+    m.reset();
+    m.set_radar_zeroed(true);
+    let zeroed = m.step(&w).unwrap();
+    m.reset();
+    let by_hand = m.step_tensors(&vec![0.0; RADAR_LEN], &imu).unwrap();
+    assert_eq!(
+        zeroed, by_hand,
+        "the ablation is the network on a zero radar tensor"
+    );
+    assert_ne!(zeroed, with_radar, "the radar input matters to the network");
+    m.reset();
+    m.set_radar_zeroed(false);
+    assert_eq!(m.step(&w).unwrap(), with_radar);
+}
