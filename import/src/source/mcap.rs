@@ -575,6 +575,23 @@ fn check_prefixes(opcode: u8, body: &[u8]) -> Result<(), String> {
         if u64::from(len) > (body.len() - at - 4) as u64 {
             return Err(cut(at + 4, u64::from(len), field));
         }
+        if *field == "metadata" {
+            // A map: its byte length, then key and value strings, each length-prefixed, all
+            // within the map.
+            let end = at + 4 + len as usize;
+            let mut k = at + 4;
+            while k < end {
+                let n = body
+                    .get(k..k + 4)
+                    .filter(|_| k + 4 <= end)
+                    .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                    .ok_or_else(|| cut(k, 4, "metadata entry length"))?;
+                if u64::from(n) > (end - k - 4) as u64 {
+                    return Err(cut(k + 4, u64::from(n), "metadata entry"));
+                }
+                k += 4 + n as usize;
+            }
+        }
         at += 4 + len as usize;
     }
     Ok(())
@@ -583,6 +600,30 @@ fn check_prefixes(opcode: u8, body: &[u8]) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn metadata_entries_beyond_their_map_are_refused() {
+        // A channel whose metadata map (8 B) holds a key claiming 0xFA000000 bytes: the input the
+        // fuzzer found (the mcap crate would allocate 4 GB for it).
+        let mut c = vec![1, 0, 0, 0];
+        for s in ["/a", "cdr"] {
+            c.extend((s.len() as u32).to_le_bytes());
+            c.extend(s.as_bytes());
+        }
+        c.extend(8u32.to_le_bytes());
+        c.extend(0xfa00_0000u32.to_le_bytes());
+        c.extend([0u8; 4]);
+        let e = check_prefixes(op::CHANNEL, &c).unwrap_err();
+        assert!(e.contains("metadata entry"), "{e}");
+        // A well-formed entry passes.
+        let mut ok = c[..c.len() - 12].to_vec();
+        ok.extend(10u32.to_le_bytes());
+        ok.extend(1u32.to_le_bytes());
+        ok.extend(b"k");
+        ok.extend(1u32.to_le_bytes());
+        ok.extend(b"v");
+        assert_eq!(check_prefixes(op::CHANNEL, &ok), Ok(()));
+    }
 
     #[test]
     fn length_prefixes_beyond_the_record_are_refused() {
