@@ -74,6 +74,8 @@ pub struct Stage {
     // Handed over, but the fallback's first pose (the bridge) is still to come.
     bridging: bool,
     pending_handover: bool,
+    /// Why the stage handed over to the fallback, once it did.
+    handover_reason: Option<String>,
     predict: Option<Strapdown>,
     // World pose of the IMU-integration frame's origin: predicted poses are the last radar-rate
     // pose moved by what the IMU integrated since.
@@ -112,7 +114,14 @@ impl Stage {
 
     /// What became of the learned measurements (the fused estimator only).
     pub fn learned(&self) -> Option<crate::summary::LearnedSummary> {
-        self.built.primary.learned()
+        let mut l = self.built.primary.learned()?;
+        l.handover = self.handover_reason.clone();
+        Some(l)
+    }
+
+    /// Why the stage handed over to the fallback, once it did.
+    pub fn handover_reason(&self) -> Option<&str> {
+        self.handover_reason.as_deref()
     }
 
     /// A stage running `built`.
@@ -125,6 +134,7 @@ impl Stage {
             shadow: Composer::default(),
             bridging: false,
             pending_handover: false,
+            handover_reason: None,
             predict: None,
             anchor: None,
             last_imu: None,
@@ -207,7 +217,10 @@ impl Stage {
         now_ns: u64,
         emit: &mut impl FnMut(PoseOut),
     ) {
-        self.built.primary.push_imu(s);
+        // After a hand-over the primary is done with: it gets nothing more.
+        if !self.use_fallback {
+            self.built.primary.push_imu(s);
+        }
         if let Some(f) = self.built.fallback.as_mut() {
             f.push_imu(s);
         }
@@ -430,11 +443,24 @@ impl Stage {
                 r.map(Step::Pose)
             }
             res => {
-                if let Err(e) = res {
+                if let Err(e) = &res {
                     self.counters.errors += 1;
                     tracing::warn!(error = %e, "primary estimator failed");
                 }
-                tracing::warn!("primary estimator unhealthy: handing over to the fallback");
+                if self.handover_reason.is_none() {
+                    let name = self.built.primary.name();
+                    self.handover_reason = Some(match &res {
+                        Err(e) => format!("the {name} estimator failed: {e}"),
+                        Ok(_) if name == "fused" => {
+                            "the learned measurements failed the online consistency check".into()
+                        }
+                        Ok(_) => format!("the {name} estimator reported itself unhealthy"),
+                    });
+                }
+                tracing::warn!(
+                    reason = self.handover_reason.as_deref().unwrap_or(""),
+                    "handing over to the fallback"
+                );
                 self.use_fallback = true;
                 let Some(r) = fb else {
                     // The fallback has no pose for this frame: bridge at its next one.

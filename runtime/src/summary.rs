@@ -83,6 +83,10 @@ pub struct LearnedSummary {
     pub model_failures: u64,
     /// Why the model was switched off, if it was (the Doppler filter went on alone).
     pub model_off: Option<String>,
+    /// Why `auto` handed over to the Doppler filter, if it did (the online check, or the model's
+    /// failure).
+    #[serde(default)]
+    pub handover: Option<String>,
 }
 
 /// Inputs decoded.

@@ -18,12 +18,16 @@ use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use pose_link::{Health, PoseMessage};
 use radar_driver::host::DecoderConfig;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 
 /// An estimator that fails from frame `at` on: the primary's fault, injected.
 struct FailFrom {
     inner: Box<dyn Estimator>,
     at: u32,
     failed: bool,
+    /// IMU samples given to it after it failed (the stage should give none).
+    imu_after: Arc<AtomicU64>,
 }
 
 impl Estimator for FailFrom {
@@ -31,6 +35,9 @@ impl Estimator for FailFrom {
         self.inner.name()
     }
     fn push_imu(&mut self, s: &ImuInput) {
+        if self.failed {
+            self.imu_after.fetch_add(1, Ordering::Relaxed);
+        }
         self.inner.push_imu(s);
     }
     fn push_radar(&mut self, f: &RadarInput<'_>) -> Result<Option<RelativePose>, EstimatorError> {
@@ -85,7 +92,7 @@ fn sim(seed: u64) -> Sim {
 /// Replays the session's recorded reads through decoders, synchroniser and a stage running
 /// `built`; the radar-rate poses (frame time \[s\], message) and the stage's counters.
 fn drive(s: &Sim, built: Built) -> (Vec<(f64, PoseMessage)>, StageCounters) {
-    let (poses, c, _) = drive_timed(s, built, 0.0);
+    let (poses, c, _, _) = drive_timed(s, built, 0.0);
     (poses, c)
 }
 
@@ -102,7 +109,12 @@ fn drive_timed(
     s: &Sim,
     built: Built,
     earlier_s: f64,
-) -> (Vec<(f64, PoseMessage)>, StageCounters, Vec<Emitted>) {
+) -> (
+    Vec<(f64, PoseMessage)>,
+    StageCounters,
+    Vec<Emitted>,
+    Option<String>,
+) {
     let radar = s.session.radar.as_ref().unwrap();
     let imu = s.session.imu.as_ref().unwrap();
     let (rb, ib) = (radar.read_all().unwrap(), imu.read_all().unwrap());
@@ -171,7 +183,8 @@ fn drive_timed(
             );
         }
     }
-    (poses, stage.counters, emitted)
+    let reason = stage.handover_reason().map(str::to_string);
+    (poses, stage.counters, emitted, reason)
 }
 
 fn iso(m: &PoseMessage) -> Isometry3<f64> {
@@ -183,10 +196,19 @@ fn iso(m: &PoseMessage) -> Isometry3<f64> {
 }
 
 fn failing(inner: Box<dyn Estimator>, at: u32) -> Box<dyn Estimator> {
+    failing_counted(inner, at, Arc::default())
+}
+
+fn failing_counted(
+    inner: Box<dyn Estimator>,
+    at: u32,
+    imu_after: Arc<AtomicU64>,
+) -> Box<dyn Estimator> {
     Box::new(FailFrom {
         inner,
         at,
         failed: false,
+        imu_after,
     })
 }
 
@@ -235,15 +257,27 @@ fn handover_between_identical_filters_changes_nothing() {
         },
     );
     let at = frame_at(&s, 50);
-    let (handed, c) = drive(
+    let imu_after = Arc::new(AtomicU64::new(0));
+    let (handed, c, _, reason) = drive_timed(
         &s,
         Built {
-            primary: failing(doppler(), at),
+            primary: failing_counted(doppler(), at, imu_after.clone()),
             fallback: Some(doppler()),
             model_fallback: false,
         },
+        0.0,
     );
     assert_eq!(c.handovers, 1);
+    assert_eq!(
+        reason.as_deref(),
+        Some("the doppler estimator failed: estimator unhealthy: injected fault"),
+        "the summary says why"
+    );
+    assert_eq!(
+        imu_after.load(Ordering::Relaxed),
+        0,
+        "the primary gets no IMU sample after the hand-over"
+    );
     assert_eq!(c.resets, 1, "only the first pose starts an origin");
     assert_eq!(handed.len(), plain.len());
     for ((t, a), (u, b)) in handed.iter().zip(&plain) {
@@ -342,7 +376,7 @@ fn a_model_pose_leaves_with_its_own_frame() {
     // synchroniser releases a frame right after the first IMU sample at or past its time, so
     // the window is complete when the frame reaches the model: its pose goes out then, not with
     // the next frame.
-    let (poses, c, when) = drive_timed(
+    let (poses, c, when, _) = drive_timed(
         &s,
         Built {
             primary,

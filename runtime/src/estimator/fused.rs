@@ -123,6 +123,8 @@ impl Estimator for Fused {
             model_windows: self.model.steps(),
             model_failures: self.model_failures,
             model_off: self.model_off.clone(),
+            // The stage fills it in (`auto`).
+            handover: None,
         })
     }
 }
