@@ -296,13 +296,19 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             .iter()
             .map(|(n, v)| {
                 let (a3, a2, d) = summarise(v);
+                let each: Vec<_> = v
+                    .iter()
+                    .map(|x| json!({"ate_3d_mean_m": x.0, "ate_2d_mean_m": x.1, "drift_pct": x.2}))
+                    .collect();
                 (n.clone(), json!({"ate_3d_mean_m": a3.mean, "ate_3d_std_m": a3.std, "ate_3d_max_m": a3.max,
-                    "ate_2d_mean_m": a2.mean, "ate_2d_std_m": a2.std, "ate_2d_max_m": a2.max, "drift_pct_mean": d.mean, "sessions": v.len()}))
+                    "ate_2d_mean_m": a2.mean, "ate_2d_std_m": a2.std, "ate_2d_max_m": a2.max, "drift_pct_mean": d.mean, "sessions": v.len(),
+                    "per_session": each}))
             })
             .collect();
         println!(
             "{}",
-            json!({"set": set.name(), "split": version.name(), "estimators": rows})
+            json!({"set": set.name(), "split": version.name(), "estimators": rows,
+                "session_names": entries.iter().map(|e| e.dir_name()).collect::<Vec<_>>()})
         );
         return Ok(());
     }

@@ -1,0 +1,60 @@
+//! `milliego score --json`: every estimator's per-session figures come with the set's summary,
+//! in the order of `session_names`, and the summary is made of them.
+
+use std::process::Command;
+
+#[test]
+fn score_json_reports_every_session_of_every_estimator() {
+    let work = tempfile::tempdir().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_milliego"))
+        .args([
+            "score",
+            "--set",
+            "val",
+            "--limit",
+            "2",
+            "--no-model",
+            "--json",
+        ])
+        .arg("--work")
+        .arg(work.path())
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "score: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    let names = v["session_names"].as_array().expect("session_names");
+    assert_eq!(names.len(), 2);
+    assert!(names
+        .iter()
+        .all(|n| n.as_str().is_some_and(|s| !s.is_empty())));
+    let rows = v["estimators"].as_object().expect("estimators");
+    assert!(rows.contains_key("Doppler RIO"), "{:?}", rows.keys());
+    for (name, row) in rows {
+        let each = row["per_session"].as_array().expect("per_session");
+        assert_eq!(each.len(), names.len(), "{name}");
+        assert_eq!(row["sessions"].as_u64(), Some(names.len() as u64));
+        let ate: Vec<f64> = each
+            .iter()
+            .map(|s| s["ate_3d_mean_m"].as_f64().expect("finite ATE"))
+            .collect();
+        let mean = ate.iter().sum::<f64>() / ate.len() as f64;
+        let max = ate.iter().cloned().fold(f64::MIN, f64::max);
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + b.abs());
+        assert!(
+            close(row["ate_3d_mean_m"].as_f64().unwrap(), mean),
+            "{name}: {row}"
+        );
+        assert!(
+            close(row["ate_3d_max_m"].as_f64().unwrap(), max),
+            "{name}: {row}"
+        );
+        for s in each {
+            assert!(s["ate_2d_mean_m"].as_f64().is_some_and(f64::is_finite));
+            assert!(s["drift_pct"].as_f64().is_some());
+        }
+    }
+}
