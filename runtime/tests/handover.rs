@@ -92,8 +92,8 @@ fn sim(seed: u64) -> Sim {
 /// Replays the session's recorded reads through decoders, synchroniser and a stage running
 /// `built`; the radar-rate poses (frame time \[s\], message) and the stage's counters.
 fn drive(s: &Sim, built: Built) -> (Vec<(f64, PoseMessage)>, StageCounters) {
-    let (poses, c, _, _) = drive_timed(s, built, 0.0);
-    (poses, c)
+    let d = drive_timed(s, built, 0.0);
+    (d.poses, d.counters)
 }
 
 /// When a radar-rate pose left the stage.
@@ -103,18 +103,20 @@ struct Emitted {
     frame_t: Option<f64>,
 }
 
-/// [`drive`], with when each pose left the stage; radar frames timed `earlier_s` \[s\] earlier
-/// than the session says.
-fn drive_timed(
-    s: &Sim,
-    built: Built,
-    earlier_s: f64,
-) -> (
-    Vec<(f64, PoseMessage)>,
-    StageCounters,
-    Vec<Emitted>,
-    Option<String>,
-) {
+/// What [`drive_timed`] saw.
+struct Driven {
+    /// Radar-rate poses (time \[s\], message).
+    poses: Vec<(f64, PoseMessage)>,
+    counters: StageCounters,
+    /// When each of `poses` left the stage.
+    emitted: Vec<Emitted>,
+    /// Why the stage handed over, if it did.
+    reason: Option<String>,
+}
+
+/// [`drive`], with when each pose left the stage and why it handed over; radar frames timed
+/// `earlier_s` \[s\] earlier than the session says.
+fn drive_timed(s: &Sim, built: Built, earlier_s: f64) -> Driven {
     let radar = s.session.radar.as_ref().unwrap();
     let imu = s.session.imu.as_ref().unwrap();
     let (rb, ib) = (radar.read_all().unwrap(), imu.read_all().unwrap());
@@ -183,8 +185,12 @@ fn drive_timed(
             );
         }
     }
-    let reason = stage.handover_reason().map(str::to_string);
-    (poses, stage.counters, emitted, reason)
+    Driven {
+        reason: stage.handover_reason().map(str::to_string),
+        poses,
+        counters: stage.counters,
+        emitted,
+    }
 }
 
 fn iso(m: &PoseMessage) -> Isometry3<f64> {
@@ -258,7 +264,12 @@ fn handover_between_identical_filters_changes_nothing() {
     );
     let at = frame_at(&s, 50);
     let imu_after = Arc::new(AtomicU64::new(0));
-    let (handed, c, _, reason) = drive_timed(
+    let Driven {
+        poses: handed,
+        counters: c,
+        reason,
+        ..
+    } = drive_timed(
         &s,
         Built {
             primary: failing_counted(doppler(), at, imu_after.clone()),
@@ -376,7 +387,12 @@ fn a_model_pose_leaves_with_its_own_frame() {
     // synchroniser releases a frame right after the first IMU sample at or past its time, so
     // the window is complete when the frame reaches the model: its pose goes out then, not with
     // the next frame.
-    let (poses, c, when, _) = drive_timed(
+    let Driven {
+        poses,
+        counters: c,
+        emitted: when,
+        ..
+    } = drive_timed(
         &s,
         Built {
             primary,
