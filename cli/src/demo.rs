@@ -121,7 +121,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
             &session_dir,
             milliego_runtime::estimator::EstimatorKind::Auto,
             &a.model,
-            milliego_odometry::learned::LearnedConfig::default(),
+            &milliego_odometry::runner::ClassicalConfig::default(),
             false,
         )?;
         write_tum(&out.join("auto.tum"), &poses)?;

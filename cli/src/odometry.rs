@@ -65,6 +65,11 @@ pub struct OdometryArgs {
     /// velocity are held at zero within 0.1 m/s at each radar frame (body frame: x forward, z up).
     #[arg(long)]
     vehicle: bool,
+    /// How long a radar frame that gives no velocity alone (too few points, no consensus) is kept
+    /// in seconds: its points, carried forward with the IMU's motion, join the next frames'
+    /// (default 0.1; 0 turns it off; docs/odometry.md).
+    #[arg(long)]
+    stack_window: Option<f64>,
 }
 
 fn parse_time_offset(s: &str) -> std::result::Result<TimeOffsetMode, String> {
@@ -106,6 +111,9 @@ pub fn run(a: OdometryArgs) -> Result<()> {
         cfg = cfg.ground_vehicle();
     }
     cfg.radar_time_shift_s = a.radar_time_shift;
+    if let Some(w) = a.stack_window {
+        cfg.stack_window_s = w.max(0.0);
+    }
     if let Some(m) = a.near_field {
         cfg.ego.near_field_m = m;
     }
@@ -116,7 +124,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
         json!({
             "session": a.session.display().to_string(), "estimator": format!("{:?}", a.estimator).to_lowercase(),
             "poses": r.trajectory.len(), "radar_frames": r.radar_frames, "imu_samples": r.imu_samples,
-            "ego_velocity": {"ok": r.ego_ok, "degenerate": r.ego_degenerate, "too_few_points": r.ego_too_few, "no_consensus": r.ego_no_consensus},
+            "ego_velocity": {"ok": r.ego_ok, "degenerate": r.ego_degenerate, "too_few_points": r.ego_too_few, "no_consensus": r.ego_no_consensus, "stacked": r.ego_stacked},
             "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "vertical_bounds": r.vertical_bounds, "nis_mean": r.nis_mean},
             "barometer": if r.pressure_readings == 0 { json!("none in the session: height from radar and IMU only") } else if a.no_barometer { json!(format!("{} readings ignored (--no-barometer)", r.pressure_readings)) } else { json!({"readings": r.pressure_readings, "updates": r.baro_updates, "rejected": r.baro_rejected}) },
             "near_field_points": r.near_field_points,

@@ -10,6 +10,7 @@ use milliego_models::offline::run_session;
 use milliego_models::Model;
 use milliego_odometry::learned::LearnedConfig;
 use milliego_odometry::offline::{run as run_offline, Estimator, OfflineConfig};
+use milliego_odometry::runner::ClassicalConfig;
 use milliego_runtime::estimator::EstimatorKind;
 use milliego_runtime::output::OutputSpec;
 use milliego_runtime::pipeline::{run as run_pipeline, Input, RunConfig};
@@ -81,6 +82,10 @@ pub struct ScoreArgs {
     /// interval: on or off (default: the shipped setting).
     #[arg(long, value_name = "on|off")]
     learned_scale: Option<String>,
+    /// How long a radar frame that gives no velocity alone is kept for the next ones \[s\]
+    /// (default: the shipped setting, docs/odometry.md; 0: off).
+    #[arg(long, value_name = "S")]
+    stack_window: Option<f64>,
 }
 
 /// One column of the table.
@@ -97,7 +102,7 @@ pub(crate) fn run_runtime(
     dir: &std::path::Path,
     kind: EstimatorKind,
     model: &std::path::Path,
-    learned: LearnedConfig,
+    classical: &ClassicalConfig,
     vehicle: bool,
 ) -> Result<(Vec<milliego_session::TumPose>, Option<LearnedSummary>, u64)> {
     let tum = std::env::temp_dir().join(format!(
@@ -111,7 +116,10 @@ pub(crate) fn run_runtime(
         outputs: vec![OutputSpec::Tum(tum.clone())],
         ..RunConfig::default()
     };
-    cfg.classical.learned = learned;
+    cfg.classical = ClassicalConfig {
+        mounting: cfg.classical.mounting,
+        ..*classical
+    };
     if vehicle {
         cfg.classical.rio.nonholonomic_std = milliego_odometry::offline::GROUND_VEHICLE_STD;
     }
@@ -225,6 +233,13 @@ pub fn run(a: ScoreArgs) -> Result<()> {
     if let Some(n) = a.learned_window {
         learned.window = n.max(1);
     }
+    let mut classical = ClassicalConfig {
+        learned,
+        ..ClassicalConfig::default()
+    };
+    if let Some(w) = a.stack_window {
+        classical.stack_window_s = w.max(0.0);
+    }
     // Per runtime column: learned measurements applied, evaluated, NIS sum; sessions handed over.
     let mut learned_use: Vec<(u64, u64, f64, usize)> = vec![(0, 0, 0.0, 0); estimators.len()];
     let mut per: Vec<(String, Vec<SessionScore>)> = estimators
@@ -257,6 +272,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
                 Column::Classical(est) => {
                     let cfg = OfflineConfig {
                         estimator: *est,
+                        stack_window_s: classical.stack_window_s,
                         ..OfflineConfig::default()
                     };
                     // What the rig's operator knows and says (`odometry --vehicle`): a car.
@@ -265,7 +281,8 @@ pub fn run(a: ScoreArgs) -> Result<()> {
                 }
                 Column::Model(m) => run_session(m, &s)?.trajectory,
                 Column::Runtime(kind, path) => {
-                    let (poses, rep, handovers) = run_runtime(&dir, *kind, path, learned, vehicle)?;
+                    let (poses, rep, handovers) =
+                        run_runtime(&dir, *kind, path, &classical, vehicle)?;
                     learned_use[k].3 += usize::from(handovers > 0);
                     if let Some(r) = rep {
                         let n = r.applied + r.gated + r.suspended;

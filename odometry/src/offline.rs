@@ -49,6 +49,9 @@ pub struct OfflineConfig {
     pub radar_time_shift_s: f64,
     /// Whether the filter estimates the radar-to-IMU time offset online.
     pub time_offset: TimeOffsetMode,
+    /// How long a frame that gave no velocity alone is kept for the next ones \[s\]
+    /// ([`ClassicalConfig::stack_window_s`]; 0: off).
+    pub stack_window_s: f64,
 }
 
 /// When the filter estimates the radar-to-IMU time offset ([`RioConfig::time_offset_std`]).
@@ -114,6 +117,7 @@ impl Default for OfflineConfig {
             use_barometer: true,
             radar_time_shift_s: 0.0,
             time_offset: TimeOffsetMode::Auto,
+            stack_window_s: c.stack_window_s,
         }
     }
 }
@@ -137,6 +141,9 @@ pub struct OfflineResult {
     pub ego_too_few: usize,
     /// Frames without consensus.
     pub ego_no_consensus: usize,
+    /// Of the frames without a velocity alone, those that gave one with the points of the frames
+    /// before them ([`crate::runner::ClassicalConfig::stack_window_s`]).
+    pub ego_stacked: usize,
     /// Filter updates applied and gated.
     pub updates: u64,
     /// Filter updates rejected by the gate.
@@ -270,6 +277,7 @@ pub fn run_with_motions(
             // Offline, both streams are complete: no radar-only dead reckoning.
             imu_gap_s: f64::INFINITY,
             learned,
+            stack_window_s: cfg.stack_window_s,
         },
         cfg.estimator == Estimator::Doppler,
     );
@@ -338,6 +346,7 @@ pub fn run_with_motions(
         ego_degenerate: n(c.ego_degenerate),
         ego_too_few: n(c.ego_too_few),
         ego_no_consensus: n(c.ego_no_consensus),
+        ego_stacked: n(c.ego_stacked),
         updates: filter.updates,
         gated: filter.gated,
         rest_samples: c.rest_samples,

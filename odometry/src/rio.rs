@@ -153,6 +153,11 @@ pub struct VelocityMeasurement {
     pub velocity: [f64; 3],
     /// Its covariance \[m^2/s^2\].
     pub covariance: [[f64; 3]; 3],
+    /// Estimated with points carried from earlier frames
+    /// ([`crate::runner::ClassicalConfig::stack_window_s`]): when the gate rejects it, it does
+    /// not count towards a re-anchoring ([`RioConfig::reanchor_after`]), which takes a
+    /// measurement without the gate.
+    pub carried: bool,
 }
 
 /// Counters of what the filter did.
@@ -296,6 +301,9 @@ pub struct Rio {
     history: StepHistory,
     /// The vehicle frame in the IMU frame (x forward, z up), for the ground vehicle constraint.
     vehicle: RadarMount,
+    /// Sum of the velocity corrections folded into the nominal state \[m/s, world\]: the
+    /// nominal velocity minus it changes only with the IMU ([`Rio::imu_velocity`]).
+    velocity_corrections: Vector3<f64>,
 }
 
 impl Rio {
@@ -333,6 +341,7 @@ impl Rio {
             time_offset: 0.0,
             history: StepHistory::new(),
             vehicle: RadarMount::default(),
+            velocity_corrections: Vector3::zeros(),
         }
     }
 
@@ -360,6 +369,23 @@ impl Rio {
                 ..NavState::at_rest(t)
             },
         )
+    }
+
+    /// The nominal velocity less every correction the filter has folded into it \[m/s, world\]:
+    /// its change between two times is what the IMU alone integrated (with the filter's
+    /// attitude and biases), whatever measurements came in between.
+    pub fn imu_velocity(&self) -> Vector3<f64> {
+        self.nav.state().v - self.velocity_corrections
+    }
+
+    /// The latest rate of turn less the gyro bias \[rad/s, IMU frame\].
+    pub fn angular_rate(&self) -> Vector3<f64> {
+        self.last_gyro - self.nav.gyro_bias
+    }
+
+    /// The radar's mounting in the IMU frame.
+    pub fn mount(&self) -> &RadarMount {
+        &self.mount
     }
 
     /// The current state.
@@ -712,6 +738,9 @@ impl Rio {
         let d2 = (y.transpose() * si * y)[(0, 0)];
         if gate && !(d2.is_finite() && d2 <= self.cfg.gate) {
             self.counters.gated += 1;
+            if m.carried {
+                return;
+            }
             self.gated_run += 1;
             if self.gated_run < self.cfg.reanchor_after || !d2.is_finite() {
                 return;
@@ -847,6 +876,7 @@ impl Rio {
         let mut ns = *self.nav.state();
         ns.p += dx.fixed_rows::<3>(0);
         ns.v += dx.fixed_rows::<3>(3);
+        self.velocity_corrections += dx.fixed_rows::<3>(3);
         ns.q *= UnitQuaternion::from_scaled_axis(dx.fixed_rows::<3>(6).into_owned());
         self.nav.accel_bias += dx.fixed_rows::<3>(9);
         self.nav.gyro_bias += dx.fixed_rows::<3>(12);

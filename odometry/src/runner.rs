@@ -15,6 +15,9 @@
 //! * rest ([`crate::rest`]): while the IMU is still and the radar's ego-velocity is zero, the
 //!   filter takes zero-velocity and zero-rate pseudo-measurements (gyro bias from the whole rest,
 //!   no drift);
+//! * sparse frames: a frame whose points alone give no ego-velocity is kept for
+//!   [`ClassicalConfig::stack_window_s`]; its points, carried to a later frame with the motion the
+//!   IMU integrated in between, join that frame's consensus (each point is used once);
 //! * IMU gaps: a frame more than [`ClassicalConfig::imu_gap_s`] after the last IMU sample is
 //!   dead-reckoned from its ego-velocity alone, and the filter re-anchors at the dead-reckoned
 //!   state when the IMU returns.
@@ -54,6 +57,20 @@ pub const EARLY_CAPACITY: usize = 256;
 
 /// Frame poses kept for learned measurements ([`Runner::push_relative_motion`]): 3.2 s at 20 Hz.
 pub const ANCHOR_CAPACITY: usize = 64;
+
+/// Frames kept for stacking at most ([`ClassicalConfig::stack_window_s`]).
+pub const STACK_FRAMES: usize = 16;
+
+/// Points kept for stacking at most (older frames give way).
+pub const STACK_POINTS: usize = 1024;
+
+/// Inliers a velocity from stacked frames needs at least: more than one frame's
+/// ([`EgoConfig::min_inliers`]), since carried points from several sparse frames also carry
+/// their ghosts and moving objects, which can agree by chance.
+pub const STACK_MIN_INLIERS: usize = 8;
+
+/// Share of the stacked points that must agree with a velocity from stacked frames.
+pub const STACK_MIN_INLIER_SHARE: f32 = 0.5;
 
 /// Largest difference between a learned measurement's keyframe time and a frame pose's \[s\].
 const ANCHOR_TOLERANCE_S: f64 = 1e-3;
@@ -130,6 +147,12 @@ pub struct ClassicalConfig {
     /// Learned relative motions as measurements ([`crate::learned`]; only the fused estimators
     /// give any).
     pub learned: LearnedConfig,
+    /// Frames whose points alone give no ego-velocity (too few, no consensus, degenerate
+    /// directions) are kept this long \[s\]: their points, each carried to a later frame with
+    /// the rotation and the velocity change the IMU integrated in between, join that frame's
+    /// points when it cannot decide alone either. Sparse scenes (an atrium, outdoors) then still
+    /// give velocities. Each point serves one estimate at most. 0: off.
+    pub stack_window_s: f64,
 }
 
 impl Default for ClassicalConfig {
@@ -143,6 +166,7 @@ impl Default for ClassicalConfig {
             rest: RestConfig::default(),
             imu_gap_s: 0.1,
             learned: LearnedConfig::default(),
+            stack_window_s: 0.1,
         }
     }
 }
@@ -199,6 +223,10 @@ pub struct RunnerCounters {
     /// Rests the filter refuted: its velocity was not consistent with zero
     /// ([`crate::rest::RestDetector::refute`]).
     pub rest_refuted: u64,
+    /// Frames whose ego-velocity came from their points together with those of earlier frames
+    /// that gave none alone ([`ClassicalConfig::stack_window_s`]); they are also counted under
+    /// the status they had alone.
+    pub ego_stacked: u64,
     /// Barometer readings seen.
     pub pressure_readings: u64,
     /// Of them, those before the filter started or during an IMU gap (not used).
@@ -211,6 +239,18 @@ struct Early {
     t: f64,
     id: u64,
     dets: Vec<Detection>,
+}
+
+/// A frame kept for stacking: its time, and the filter's attitude, IMU-integrated velocity
+/// ([`Rio::imu_velocity`]) and rate of turn when it came; its points are the next `len` of the
+/// stack's.
+#[derive(Debug, Clone, Copy)]
+struct Stacked {
+    t: f64,
+    q: UnitQuaternion<f64>,
+    v: Vector3<f64>,
+    w: Vector3<f64>,
+    len: usize,
 }
 
 /// The filter's prediction just before the latest IMU sample: the prior of a frame that comes
@@ -233,6 +273,8 @@ pub struct Runner {
     level: Vec<ImuSample>,
     early: Vec<Early>,
     ego: EgoVelocityEstimator,
+    // The same with the stricter consensus carried points need ([`STACK_MIN_INLIERS`]).
+    ego_stacked: EgoVelocityEstimator,
     est: Estimate,
     dets: Vec<Detection>,
     rest: RestDetector,
@@ -250,6 +292,11 @@ pub struct Runner {
     // Recent frame poses (time, body pose, radar updates applied so far), for learned
     // measurements.
     anchors: VecDeque<(f64, Isometry3<f64>, u64)>,
+    // Frames that gave no velocity alone, oldest first, and their points in the same order.
+    stack: VecDeque<Stacked>,
+    stack_points: Vec<Detection>,
+    // A frame's points with the stack's carried to it.
+    stacked: Vec<Detection>,
     monitor: Monitor,
     learned: LearnedCounters,
     scale: ScaleCalibration,
@@ -278,6 +325,11 @@ impl Runner {
             level: Vec::with_capacity(LEVEL_CAPACITY),
             early: Vec::with_capacity(EARLY_CAPACITY),
             ego: EgoVelocityEstimator::new(cfg.ego),
+            ego_stacked: EgoVelocityEstimator::new(EgoConfig {
+                min_inliers: cfg.ego.min_inliers.max(STACK_MIN_INLIERS),
+                min_inlier_share: cfg.ego.min_inlier_share.max(STACK_MIN_INLIER_SHARE),
+                ..cfg.ego
+            }),
             est: Estimate::with_capacity(1024),
             dets: Vec::with_capacity(1024),
             rest: RestDetector::new(cfg.rest),
@@ -290,6 +342,9 @@ impl Runner {
             out: VecDeque::with_capacity(EARLY_CAPACITY + 64),
             counters: RunnerCounters::default(),
             anchors: VecDeque::with_capacity(ANCHOR_CAPACITY),
+            stack: VecDeque::with_capacity(STACK_FRAMES),
+            stack_points: Vec::with_capacity(STACK_POINTS),
+            stacked: Vec::with_capacity(2 * STACK_POINTS),
             monitor: Monitor::new(cfg.learned),
             learned: LearnedCounters::default(),
             scale: ScaleCalibration::default(),
@@ -369,6 +424,7 @@ impl Runner {
             let st = NavState { t: s.t, ..d };
             self.rio = Some(self.filter_from(Rio::new(self.cfg.rio, self.mount, st)));
             self.counters.imu_restarts += 1;
+            self.clear_stack();
         }
         if self.rio.is_none() {
             if self.level.is_empty() {
@@ -665,6 +721,7 @@ impl Runner {
                 let s = self.cfg.velocity_cov_scale;
                 Some(VelocityMeasurement {
                     t,
+                    carried: false,
                     velocity: self.est.velocity.map(f64::from),
                     covariance: self.est.covariance.map(|r| r.map(|x| f64::from(x) * s)),
                 })
@@ -702,6 +759,8 @@ impl Runner {
         });
         let guided_now = prior.is_some();
         let m = self.measure(t, dets, prior);
+        let no_consensus = matches!(self.est.status, Status::NoConsensus { .. });
+        let near_field = self.est.near_field;
         // The radar's verdict on rest: its own estimate (before the filter takes it) and the
         // share of points with zero Doppler.
         // Near-field points are left out: leakage there has zero Doppler whatever the motion.
@@ -715,7 +774,7 @@ impl Runner {
                 still += usize::from(d.radial_velocity.abs() <= zero);
             }
         }
-        self.counters.near_field_points += self.est.near_field as u64;
+        self.counters.near_field_points += near_field as u64;
         let verdict = self
             .rest
             .push_radar(t, m.map(|m| (m.velocity, m.covariance)), still, seen);
@@ -734,10 +793,21 @@ impl Runner {
             // The frame agrees with the filter (zero velocity): the rejection run ends.
             self.rejected_in_row = 0;
             None
+        } else if m.is_none() && !still {
+            // Moving and no velocity alone: with the points of the frames before. Not while
+            // the IMU is still (rest is decided on the frame's own points: carried points add
+            // the IMU's integration error, which at rest is all they would say).
+            self.measure_stacked(t, dets, prior)
         } else {
             m
         };
         let at_rest = resting_now;
+        if at_rest || m.is_some() {
+            // At rest, or the frame decided (alone, or with the stack's points, now used).
+            self.clear_stack();
+        } else {
+            self.keep_for_stack(t, dets);
+        }
         if let Some(rio) = self.rio.as_mut() {
             if let Some(m) = m {
                 let before = *rio.counters();
@@ -749,14 +819,146 @@ impl Runner {
                 rio.push_frame_without_velocity(t);
             }
         }
-        if matches!(self.est.status, Status::NoConsensus { .. }) {
+        if no_consensus && m.is_none() {
             // No consensus under the prior: the frame disagrees with the filter.
             self.rejected_in_row += u32::from(guided_now);
         }
     }
 
+    /// Forgets the frames kept for stacking.
+    fn clear_stack(&mut self) {
+        self.stack.clear();
+        self.stack_points.clear();
+    }
+
+    /// Drops the oldest kept frame.
+    fn drop_oldest_stacked(&mut self) {
+        if let Some(f) = self.stack.pop_front() {
+            self.stack_points
+                .drain(..f.len.min(self.stack_points.len()));
+        }
+    }
+
+    /// Keeps a frame that gave no velocity, with the filter's state now, for later frames
+    /// ([`ClassicalConfig::stack_window_s`]). Near-field points with zero Doppler (possible
+    /// leakage, zero whatever the motion) are not kept.
+    fn keep_for_stack(&mut self, t: f64, dets: &[Detection]) {
+        let Some(rio) = self.rio.as_ref() else {
+            return;
+        };
+        let (q, v, w) = (rio.state().q, rio.imu_velocity(), rio.angular_rate());
+        let window = self.cfg.stack_window_s;
+        if !(window.is_finite() && window > 0.0) {
+            return;
+        }
+        let zero = self.cfg.ego.inlier_threshold();
+        let near2 = self.cfg.ego.near_field_m * self.cfg.ego.near_field_m;
+        let kept = |d: &&Detection| {
+            let [x, y, z] = d.position;
+            x * x + y * y + z * z >= near2 || d.radial_velocity.abs() > zero
+        };
+        let n = dets.iter().filter(kept).count();
+        if n == 0 || n > STACK_POINTS {
+            return;
+        }
+        while self.stack.len() >= STACK_FRAMES || self.stack_points.len() + n > STACK_POINTS {
+            self.drop_oldest_stacked();
+        }
+        self.stack.push_back(Stacked { t, q, v, w, len: n });
+        self.stack_points.extend(dets.iter().filter(kept).copied());
+    }
+
+    /// The ego-velocity of a frame that gave none alone, from its points and those of the kept
+    /// frames within [`ClassicalConfig::stack_window_s`] before it, each carried to this frame:
+    /// a static point seen from frame k, `vr = -u . v_k`, reads `vr + u . (v_k' - M v_n') =
+    /// -(M^T u) . v_n` here, where `M` rotates this frame's radar axes into frame k's and `v'`
+    /// are the radar velocities the filter predicts from its IMU-integrated velocity (so only
+    /// the change between the two frames, which the IMU measured, enters; not the filter's
+    /// velocity error). Counted as [`RunnerCounters::ego_stacked`] when it succeeds.
+    fn measure_stacked(
+        &mut self,
+        t: f64,
+        dets: &[Detection],
+        prior: Option<Prior>,
+    ) -> Option<VelocityMeasurement> {
+        let window = self.cfg.stack_window_s;
+        while self.stack.front().is_some_and(|f| !(t - f.t <= window)) {
+            self.drop_oldest_stacked();
+        }
+        let rio = self.rio.as_ref()?;
+        if self.stack.is_empty() || dets.len() > STACK_POINTS {
+            return None;
+        }
+        let q_br = self.mount.rotation;
+        let t_br = self.mount.translation;
+        let radar_velocity = |q: &UnitQuaternion<f64>, v: &Vector3<f64>, w: &Vector3<f64>| {
+            q_br.inverse() * (q.inverse() * v + w.cross(&t_br))
+        };
+        let st = rio.state();
+        let q_wr_n = st.q * q_br;
+        let v_n = radar_velocity(&st.q, &rio.imu_velocity(), &rio.angular_rate());
+        self.stacked.clear();
+        self.stacked.extend_from_slice(dets);
+        let mut at = 0;
+        for f in &self.stack {
+            let v_k = radar_velocity(&f.q, &f.v, &f.w);
+            // This frame's radar axes into frame k's: M = R_wr(k)^T R_wr(n).
+            let m = (f.q * q_br).inverse() * q_wr_n;
+            for d in &self.stack_points[at..at + f.len] {
+                let p = Vector3::new(
+                    f64::from(d.position[0]),
+                    f64::from(d.position[1]),
+                    f64::from(d.position[2]),
+                );
+                let r = p.norm();
+                if !(r > 0.0) {
+                    continue;
+                }
+                let u = p / r;
+                let p_n = m.inverse() * p;
+                let u_n = p_n / r;
+                let vr = f64::from(d.radial_velocity) + u.dot(&v_k) - u_n.dot(&v_n);
+                self.stacked.push(Detection {
+                    position: [p_n.x as f32, p_n.y as f32, p_n.z as f32],
+                    radial_velocity: vr as f32,
+                });
+            }
+            at += f.len;
+        }
+        // The carried points are off by the error of the velocity change the filter integrated
+        // since their frame: its tilt error on gravity and its accelerometer bias error, over
+        // the span (a common offset of each frame's points, so added to the estimate's
+        // covariance as such).
+        let p = rio.covariance();
+        let g = self.cfg.rio.gravity;
+        let tilt = p[(6, 6)].max(p[(7, 7)]).max(0.0);
+        let bias = p[(9, 9)].max(p[(10, 10)]).max(p[(11, 11)]).max(0.0);
+        let span = self.stack.front().map_or(0.0, |f| (t - f.t).max(0.0));
+        let carried = (g * g * tilt + bias) * span * span;
+        let pts = std::mem::take(&mut self.stacked);
+        self.ego_stacked
+            .estimate_guided_into(&pts, prior, &mut self.est);
+        self.stacked = pts;
+        if self.est.status != Status::Ok {
+            return None;
+        }
+        self.counters.ego_stacked += 1;
+        let s = self.cfg.velocity_cov_scale;
+        let mut covariance = self.est.covariance.map(|r| r.map(|x| f64::from(x) * s));
+        for (k, row) in covariance.iter_mut().enumerate() {
+            row[k] += carried;
+        }
+        Some(VelocityMeasurement {
+            t,
+            velocity: self.est.velocity.map(f64::from),
+            covariance,
+            carried: true,
+        })
+    }
+
     /// No IMU: hold the attitude, integrate the radar velocity to `t` \[s\].
     fn dead_reckon(&mut self, t: f64) {
+        self.clear_stack();
         let Some(rio) = self.rio.as_ref() else {
             return;
         };

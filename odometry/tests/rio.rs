@@ -107,6 +107,7 @@ fn follows_a_walk_and_beats_dead_reckoning() {
             let c = radar_sigma * radar_sigma;
             rio.push_velocity(VelocityMeasurement {
                 t,
+                carried: false,
                 velocity: vr.into(),
                 covariance: [[c, 0.0, 0.0], [0.0, c, 0.0], [0.0, 0.0, c]],
             });
@@ -163,6 +164,7 @@ fn outlying_velocity_measurements_are_gated() {
             let v = if i == 100 { [25.0, 0.0, 0.0] } else { [0.0; 3] };
             rio.push_velocity(VelocityMeasurement {
                 t,
+                carried: false,
                 velocity: v,
                 covariance: [[1e-3, 0.0, 0.0], [0.0, 1e-3, 0.0], [0.0, 0.0, 1e-3]],
             });
