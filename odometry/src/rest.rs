@@ -22,6 +22,12 @@
 //! [`RestConfig::radar_max_age_s`] old, is still. It lasts while the IMU stays still and no frame
 //! says moving: single frames with too much multipath do not break it.
 //!
+//! The start is the exception: the filter is levelled on the assumption that the rig starts at
+//! rest, and until the IMU first moves or a frame says moving nothing contradicts it, so frames
+//! without a verdict (too few points, no consensus: a sparse outdoor scene, a radar tilted up)
+//! do not keep that first rest from counting once a frame is in ([`RestDetector::push_radar`]).
+//! A start in motion ends it at once: the IMU is not still, or the radar sees the motion.
+//!
 //! While at rest the filter takes zero-velocity, position-hold and zero-rate pseudo-measurements
 //! ([`crate::rio::Rio::zero_velocity`], [`crate::rio::Rio::hold_position`],
 //! [`crate::rio::Rio::zero_rate`]) every [`RestConfig::update_period_s`]: the velocity stays zero,
@@ -132,6 +138,9 @@ pub struct RestDetector {
     /// The filter refuted the last rest ([`RestDetector::refute`]): no rest until the IMU has
     /// moved.
     refuted: bool,
+    /// Nothing has contradicted the rest the session starts in yet: every decided sample's IMU
+    /// was still and no frame said moving.
+    initial: bool,
 }
 
 /// Radar verdicts kept (frames come every 30-100 ms, IMU samples every 2.5-10 ms: one or two
@@ -176,6 +185,7 @@ impl RestDetector {
             since: None,
             last_update: None,
             refuted: false,
+            initial: true,
         }
     }
 
@@ -210,6 +220,7 @@ impl RestDetector {
         } else {
             Verdict::None
         };
+        self.initial &= verdict != Verdict::Moving;
         if self.verdicts.len() == VERDICTS {
             self.verdicts.pop_front();
         }
@@ -244,6 +255,9 @@ impl RestDetector {
     fn evaluate(&mut self) -> Option<RestUpdate> {
         let s = *self.window.back()?;
         let still = self.imu_still();
+        // The window fills over the first samples: only a full one that is not still ends the
+        // initial rest.
+        self.initial &= still || !self.window_decides();
         self.still = [still, self.still[0]];
         self.refuted &= still;
         let now = still && !self.refuted && self.radar_agrees(s.t);
@@ -311,8 +325,19 @@ impl RestDetector {
         match latest {
             Some((_, Verdict::Moving)) | None => false,
             Some((tr, Verdict::Still)) if t - tr <= self.cfg.radar_max_age_s => true,
-            Some(_) => self.resting[0],
+            // A frame without a verdict: the rest goes on, and so does the one the session
+            // starts in, uncontradicted so far.
+            Some(_) => self.resting[0] || self.initial,
         }
+    }
+
+    /// Whether the IMU window is long enough to decide on stillness: at least 10 samples over
+    /// [`MIN_SPAN_S`] (or the whole window when that is shorter).
+    fn window_decides(&self) -> bool {
+        let (Some(first), Some(last)) = (self.window.front(), self.window.back()) else {
+            return false;
+        };
+        self.window.len() >= 10 && last.t - first.t >= MIN_SPAN_S.min(self.cfg.window_s)
     }
 
     /// True when the IMU window holds at least 10 samples over [`MIN_SPAN_S`] (so a rest at the
@@ -320,10 +345,7 @@ impl RestDetector {
     /// mean rate of turn is below [`RestConfig::gyro_rate_max`] and the mean specific force is
     /// gravity within [`RestConfig::gravity_tolerance`].
     pub fn imu_still(&self) -> bool {
-        let (Some(first), Some(last)) = (self.window.front(), self.window.back()) else {
-            return false;
-        };
-        if self.window.len() < 10 || last.t - first.t < MIN_SPAN_S.min(self.cfg.window_s) {
+        if !self.window_decides() {
             return false;
         }
         // Mean and spread (sqrt of the covariance trace) of one triad over the window.
@@ -427,6 +449,40 @@ mod tests {
         };
         d.push_imu(&shake);
         assert!(d.push_imu(&still_imu(2.705)).is_none() && !d.resting());
+    }
+
+    #[test]
+    fn the_start_is_at_rest_until_the_imu_or_the_radar_says_otherwise() {
+        // Still from the first sample, frames too sparse for a verdict (no velocity, 3 points):
+        // the rest the session starts in counts once a frame is in.
+        let mut d = RestDetector::new(RestConfig::default());
+        assert!(feed(&mut d, 0.0, 0.5).is_empty() && !d.resting());
+        assert_eq!(d.push_radar(0.5, None, 1, 3), Verdict::None);
+        assert!(!feed(&mut d, 0.5, 1.0).is_empty() && d.resting());
+        // A frame that says moving ends it, and frames without a verdict do not bring it back.
+        assert_eq!(d.push_radar(1.0, FAST, 0, 3), Verdict::Moving);
+        assert!(feed(&mut d, 1.0, 1.2).iter().all(|u| u.t < 1.0) && !d.resting());
+        d.push_radar(1.2, None, 1, 3);
+        assert!(feed(&mut d, 1.2, 2.0).is_empty() && !d.resting());
+
+        // An IMU that moves first ends it too: still again, without a verdict, is not rest.
+        let mut d = RestDetector::new(RestConfig::default());
+        feed(&mut d, 0.0, 0.3);
+        d.push_radar(0.3, None, 1, 3);
+        assert!(!feed(&mut d, 0.3, 0.6).is_empty() && d.resting());
+        for k in 0..40 {
+            d.push_imu(&ImuSample {
+                t: 0.6 + f64::from(k) * 0.005,
+                accel: [2.0 * f64::from(k % 2), 0.0, 9.81],
+                gyro: [0.0, 0.4, 0.0],
+            });
+        }
+        assert!(!d.resting());
+        d.push_radar(0.8, None, 1, 3);
+        assert!(feed(&mut d, 0.8, 2.0).is_empty() && !d.resting());
+        // The radar can still call a rest.
+        d.push_radar(2.0, ZERO, 12, 20);
+        assert!(!feed(&mut d, 2.0, 2.3).is_empty() && d.resting());
     }
 
     #[test]
