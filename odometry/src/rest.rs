@@ -25,8 +25,10 @@
 //! The start is the exception: the filter is levelled on the assumption that the rig starts at
 //! rest, and until the IMU first moves or a frame says moving nothing contradicts it, so frames
 //! without a verdict (too few points, no consensus: a sparse outdoor scene, a radar tilted up)
-//! do not keep that first rest from counting once a frame is in ([`RestDetector::push_radar`]).
-//! A start in motion ends it at once: the IMU is not still, or the radar sees the motion.
+//! do not keep that first rest from counting once a frame is in ([`RestDetector::push_radar`]),
+//! and the filter's velocity does not refute it (the filter starts from it: what it holds then
+//! came from a radar frame, and at the very start a ghost consensus has no prior to stop it). A
+//! start in motion ends it at once: the IMU is not still, or two frames in a row see the motion.
 //!
 //! While at rest the filter takes zero-velocity, position-hold and zero-rate pseudo-measurements
 //! ([`crate::rio::Rio::zero_velocity`], [`crate::rio::Rio::hold_position`],
@@ -220,7 +222,10 @@ impl RestDetector {
         } else {
             Verdict::None
         };
-        self.initial &= verdict != Verdict::Moving;
+        // One frame saying moving amid still ones is a ghost consensus as often as not (the very
+        // first frames have no prior to tell): two in a row end the initial rest.
+        let last_moving = self.verdicts.back().is_some_and(|v| v.1 == Verdict::Moving);
+        self.initial &= !(verdict == Verdict::Moving && last_moving);
         if self.verdicts.len() == VERDICTS {
             self.verdicts.pop_front();
         }
@@ -296,6 +301,12 @@ impl RestDetector {
         self.since = None;
         self.gyro_sum = Vector3::zeros();
         self.gyro_n = 0;
+    }
+
+    /// Whether the rest the session starts in is still uncontradicted (see the module
+    /// documentation). The filter's velocity cannot refute it: the filter starts from that rest.
+    pub fn initial(&self) -> bool {
+        self.initial
     }
 
     /// Whether the last sample decided on was at rest.
@@ -459,9 +470,17 @@ mod tests {
         assert!(feed(&mut d, 0.0, 0.5).is_empty() && !d.resting());
         assert_eq!(d.push_radar(0.5, None, 1, 3), Verdict::None);
         assert!(!feed(&mut d, 0.5, 1.0).is_empty() && d.resting());
-        // A frame that says moving ends it, and frames without a verdict do not bring it back.
+        // One frame that says moving pauses it (a ghost consensus, as often as not); two in a row
+        // end it, and frames without a verdict do not bring it back.
         assert_eq!(d.push_radar(1.0, FAST, 0, 3), Verdict::Moving);
-        assert!(feed(&mut d, 1.0, 1.2).iter().all(|u| u.t < 1.0) && !d.resting());
+        assert!(feed(&mut d, 1.0, 1.05).iter().all(|u| u.t < 1.0) && !d.resting());
+        assert!(d.initial());
+        d.push_radar(1.05, None, 1, 3);
+        assert!(!feed(&mut d, 1.05, 1.1).is_empty() && d.resting());
+        d.push_radar(1.1, FAST, 0, 3);
+        d.push_radar(1.15, FAST, 0, 3);
+        assert!(!d.initial());
+        assert!(feed(&mut d, 1.1, 1.2).iter().all(|u| u.t < 1.1) && !d.resting());
         d.push_radar(1.2, None, 1, 3);
         assert!(feed(&mut d, 1.2, 2.0).is_empty() && !d.resting());
 

@@ -683,8 +683,9 @@ impl Runner {
         };
         let c = *self.rest.config();
         let due = due.filter(|_| {
-            // A rest the filter's velocity contradicts is refuted, not applied.
-            let ok = rio.at_rest_consistent(c.zero_velocity_std);
+            // A rest the filter's velocity contradicts is refuted, not applied (not the rest the
+            // session starts in: the filter starts from it).
+            let ok = self.rest.initial() || rio.at_rest_consistent(c.zero_velocity_std);
             if !ok {
                 self.rest.refute();
                 self.counters.rest_refuted += 1;
