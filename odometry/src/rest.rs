@@ -476,13 +476,13 @@ mod tests {
         assert!(feed(&mut d, 1.0, 1.05).iter().all(|u| u.t < 1.0) && !d.resting());
         assert!(d.initial());
         d.push_radar(1.05, None, 1, 3);
-        assert!(!feed(&mut d, 1.05, 1.1).is_empty() && d.resting());
-        d.push_radar(1.1, FAST, 0, 3);
-        d.push_radar(1.15, FAST, 0, 3);
+        assert!(!feed(&mut d, 1.05, 1.2).is_empty() && d.resting());
+        d.push_radar(1.2, FAST, 0, 3);
+        d.push_radar(1.25, FAST, 0, 3);
         assert!(!d.initial());
-        assert!(feed(&mut d, 1.1, 1.2).iter().all(|u| u.t < 1.1) && !d.resting());
-        d.push_radar(1.2, None, 1, 3);
-        assert!(feed(&mut d, 1.2, 2.0).is_empty() && !d.resting());
+        assert!(feed(&mut d, 1.2, 1.3).iter().all(|u| u.t < 1.2) && !d.resting());
+        d.push_radar(1.3, None, 1, 3);
+        assert!(feed(&mut d, 1.3, 2.0).is_empty() && !d.resting());
 
         // An IMU that moves first ends it too: still again, without a verdict, is not rest.
         let mut d = RestDetector::new(RestConfig::default());
