@@ -884,7 +884,11 @@ impl Runner {
         prior: Option<Prior>,
     ) -> Option<VelocityMeasurement> {
         let window = self.cfg.stack_window_s;
-        while self.stack.front().is_some_and(|f| !(t - f.t <= window)) {
+        while self
+            .stack
+            .front()
+            .is_some_and(|f| (t - f.t).is_nan() || t - f.t > window)
+        {
             self.drop_oldest_stacked();
         }
         let rio = self.rio.as_ref()?;
@@ -913,7 +917,7 @@ impl Runner {
                     f64::from(d.position[2]),
                 );
                 let r = p.norm();
-                if !(r > 0.0) {
+                if r.is_nan() || r <= 0.0 {
                     continue;
                 }
                 let u = p / r;
