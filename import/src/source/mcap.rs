@@ -160,12 +160,47 @@ impl McapFile {
                 }
             });
         }
-        Ok(McapFile {
+        let m = McapFile {
             path: path.into(),
             file: file.into(),
             size,
             decompressed: file != path,
-        })
+        };
+        m.check_chunks()?;
+        Ok(m)
+    }
+
+    /// Walks the records inside every uncompressed chunk before the reader iterates them: the
+    /// `mcap` crate's reader subtracts an inner record's length from what is left of its chunk
+    /// without checking it (a record claiming more than the chunk holds underflows: a panic with
+    /// overflow checks, a runaway read without). Found by the fuzz target `import_mcap`.
+    fn check_chunks(&self) -> Result<(), SourceError> {
+        let mut file = File::open(&self.file).map_err(|e| self.io(e))?;
+        let mut reader = LinearReader::new_with_options(
+            LinearReaderOptions::default()
+                .with_emit_chunks(true)
+                .with_record_length_limit(MAX_RECORD_BYTES),
+        );
+        let mut fed: u64 = 0;
+        while let Some(event) = reader.next_event() {
+            match event.map_err(|e| self.mcap_err(fed, &e))? {
+                LinearReadEvent::ReadRequest(need) => {
+                    let buf = reader.insert(need.clamp(1, READ_PIECE));
+                    let n = file.read(buf).map_err(|e| self.io(e))?;
+                    fed += n as u64;
+                    reader.notify_read(n);
+                }
+                LinearReadEvent::Record { opcode, data } => {
+                    if opcode == op::DATA_END {
+                        break;
+                    }
+                    if opcode == op::CHUNK {
+                        check_chunk(data).map_err(|why| self.corrupt(fed, why))?;
+                    }
+                }
+            }
+        }
+        Ok(())
     }
 
     /// File size \[B\].
@@ -550,6 +585,57 @@ impl Source for McapFile {
 /// string name, string encoding`; channel `u16 id, u16 schema id, string topic, string message
 /// encoding, map metadata` (a string or map is `u32 len` + that many bytes). The schema's data
 /// length the crate checks itself; message records have no prefix before their data.
+/// An uncompressed chunk's records (opcode, u64 length, body) each within the chunk: the
+/// chunk's header (start and end time, uncompressed size, CRC, compression, records length) is
+/// read as the `mcap` reader reads it; compressed chunks are left to the decompressor's own checks.
+fn check_chunk(body: &[u8]) -> Result<(), String> {
+    let u64_at = |at: usize| {
+        body.get(at..at + 8)
+            .map(|b| u64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
+    };
+    let cut = |what: &str, at: usize| {
+        format!(
+            "chunk: its {what} at byte {at} is cut (the chunk has {} B)",
+            body.len()
+        )
+    };
+    let comp_len = body
+        .get(28..32)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
+        .ok_or_else(|| cut("compression", 28))?;
+    let at = 32usize
+        .checked_add(comp_len)
+        .filter(|&a| a <= body.len())
+        .ok_or_else(|| cut("compression name", 32))?;
+    if comp_len > 0 {
+        return Ok(());
+    }
+    let records = u64_at(at).ok_or_else(|| cut("records length", at))?;
+    let start = at + 8;
+    let left = (body.len() - start) as u64;
+    if records > left {
+        return Err(format!(
+            "chunk: its records claim {records} B at byte {start}, the chunk has {left} B"
+        ));
+    }
+    let end = start + records as usize;
+    let mut k = start;
+    while k < end {
+        let len = u64_at(k + 1)
+            .filter(|_| k + 9 <= end)
+            .ok_or_else(|| cut("record header", k))?;
+        if len > (end - k - 9) as u64 {
+            return Err(format!(
+                "chunk: its record at byte {k} (opcode {:#04x}) claims {len} B, {} B are left",
+                body[k],
+                end - k - 9
+            ));
+        }
+        k += 9 + len as usize;
+    }
+    Ok(())
+}
+
 fn check_prefixes(opcode: u8, body: &[u8]) -> Result<(), String> {
     let (what, fixed, prefixed): (&str, usize, &[&str]) = match opcode {
         op::SCHEMA => ("schema", 2, &["name", "encoding"]),
@@ -644,6 +730,37 @@ mod tests {
         );
         assert!(check_prefixes(op::CHANNEL, &ok[..ok.len() - 2]).is_err());
         assert!(check_prefixes(op::SCHEMA, &[1]).is_err());
+    }
+
+    #[test]
+    fn a_chunk_record_beyond_its_chunk_is_an_error_not_an_underflow() {
+        // The fuzz target's input (after the magic it prepends): an uncompressed chunk whose
+        // inner record claims 0x07ffffffffffffff bytes.
+        let tail: &[u8] = &[
+            6, 0, 0, 110, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 255, 255, 255, 255, 255, 255, 255, 7, 0, 0,
+            0, 0, 0, 0, 254, 253, 255, 255, 255, 255, 255, 255, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0,
+            0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 2,
+        ];
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("f.mcap");
+        let mut bytes = b"\x89MCAP0\r\n".to_vec();
+        bytes.extend(tail);
+        std::fs::write(&p, bytes).unwrap();
+        let r = McapFile::open(&p).and_then(|mut f| f.metadata());
+        assert!(r.is_err(), "{r:?}");
+        // A chunk whose one record overruns it, built field by field.
+        let mut chunk = vec![0u8; 28];
+        chunk.extend(0u32.to_le_bytes()); // no compression
+        chunk.extend(12u64.to_le_bytes()); // records: 12 B
+        chunk.push(op::MESSAGE);
+        chunk.extend(100u64.to_le_bytes()); // claims 100 B
+        chunk.extend([0u8; 3]);
+        let e = check_chunk(&chunk).unwrap_err();
+        assert!(e.contains("claims 100 B, 3 B are left"), "{e}");
+        // The same record fitting is fine.
+        let n = chunk.len();
+        chunk[n - 11..n - 3].copy_from_slice(&3u64.to_le_bytes());
+        assert_eq!(check_chunk(&chunk), Ok(()));
     }
 
     #[test]
