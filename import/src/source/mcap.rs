@@ -190,10 +190,8 @@ impl McapFile {
                     fed += n as u64;
                     reader.notify_read(n);
                 }
+                // The whole file: a chunk after the data end is still read by `scan`.
                 LinearReadEvent::Record { opcode, data } => {
-                    if opcode == op::DATA_END {
-                        break;
-                    }
                     if opcode == op::CHUNK {
                         check_chunk(data).map_err(|why| self.corrupt(fed, why))?;
                     }
@@ -747,6 +745,18 @@ mod tests {
         bytes.extend(tail);
         std::fs::write(&p, bytes).unwrap();
         let r = McapFile::open(&p).and_then(|mut f| f.metadata());
+        assert!(r.is_err(), "{r:?}");
+        // The second one: the same kind of chunk after a data-end record.
+        let tail: &[u8] = &[
+            15, 7, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 118, 0, 6, 0, 64, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+            0, 0, 0, 0, 0, 116, 182, 65, 239, 42, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+            0, 0, 0, 6, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+            0, 0, 0, 0, 0, 10,
+        ];
+        let mut bytes = b"\x89MCAP0\r\n".to_vec();
+        bytes.extend(tail);
+        std::fs::write(&p, bytes).unwrap();
+        let r = McapFile::open(&p).and_then(|mut f| f.topics());
         assert!(r.is_err(), "{r:?}");
         // A chunk whose one record overruns it, built field by field.
         let mut chunk = vec![0u8; 28];
