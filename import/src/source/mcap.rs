@@ -664,7 +664,9 @@ fn check_prefixes(opcode: u8, body: &[u8]) -> Result<(), String> {
             // within the map.
             let end = at + 4 + len as usize;
             let mut k = at + 4;
+            let mut strings = 0usize;
             while k < end {
+                strings += 1;
                 let n = body
                     .get(k..k + 4)
                     .filter(|_| k + 4 <= end)
@@ -674,6 +676,11 @@ fn check_prefixes(opcode: u8, body: &[u8]) -> Result<(), String> {
                     return Err(cut(k + 4, u64::from(n), "metadata entry"));
                 }
                 k += 4 + n as usize;
+            }
+            if strings % 2 == 1 {
+                // The `mcap` crate reads the value's length past the map's end (a key without
+                // a value made it allocate gigabytes: found by the fuzz target).
+                return Err(cut(end, 4, "metadata value length (a key without a value)"));
             }
         }
         at += 4 + len as usize;
@@ -728,6 +735,23 @@ mod tests {
         );
         assert!(check_prefixes(op::CHANNEL, &ok[..ok.len() - 2]).is_err());
         assert!(check_prefixes(op::SCHEMA, &[1]).is_err());
+    }
+
+    #[test]
+    fn a_metadata_key_without_a_value_is_refused() {
+        // Name "", a 4-byte map holding one empty key and no value (the fuzzer's input had the
+        // value's length read from beyond the map: a 2.3 GB allocation).
+        let mut body = 0u32.to_le_bytes().to_vec();
+        body.extend(4u32.to_le_bytes());
+        body.extend(0u32.to_le_bytes());
+        body.extend([0, 2, 0, 0xf6, 0xff, 0xff, 0xff, 0x7f]);
+        let e = check_prefixes(op::METADATA, &body).unwrap_err();
+        assert!(e.contains("a key without a value"), "{e}");
+        // Key and value, both empty: fine.
+        let mut body = 0u32.to_le_bytes().to_vec();
+        body.extend(8u32.to_le_bytes());
+        body.extend([0u8; 8]);
+        assert_eq!(check_prefixes(op::METADATA, &body), Ok(()));
     }
 
     #[test]
