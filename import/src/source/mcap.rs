@@ -25,6 +25,9 @@ use std::path::{Path, PathBuf};
 /// The first bytes of an MCAP file.
 pub const MAGIC: &[u8] = &[0x89, b'M', b'C', b'A', b'P', 0x30, b'\r', b'\n'];
 
+/// A record's opcode, body and the bytes read so far -> go on?  ([`McapFile::records`]).
+type OnRecord<'a> = dyn FnMut(u8, &[u8], u64) -> Result<bool, SourceError> + 'a;
+
 /// The most bytes handed to the reader per `read` call \[B\]. The reader's buffer grows only as
 /// data actually arrives, so a corrupt record length cannot make it allocate more than the file
 /// holds.
@@ -175,12 +178,29 @@ impl McapFile {
     /// without checking it (a record claiming more than the chunk holds underflows: a panic with
     /// overflow checks, a runaway read without). Found by the fuzz target `import_mcap`.
     fn check_chunks(&self) -> Result<(), SourceError> {
+        // The whole file: a chunk after the data end is still read by `scan`.
+        self.records(
+            LinearReaderOptions::default().with_emit_chunks(true),
+            &mut |opcode, data, fed| {
+                if opcode == op::CHUNK {
+                    check_chunk(data).map_err(|why| self.corrupt(fed, why))?;
+                }
+                Ok(true)
+            },
+        )
+    }
+
+    /// Reads the file through a linear reader with `options` (and the record length limit),
+    /// giving each record's opcode and body, with the bytes fed so far (where an error shows),
+    /// to `on_record` until it returns `false`.
+    fn records(
+        &self,
+        options: LinearReaderOptions,
+        on_record: &mut OnRecord<'_>,
+    ) -> Result<(), SourceError> {
         let mut file = File::open(&self.file).map_err(|e| self.io(e))?;
-        let mut reader = LinearReader::new_with_options(
-            LinearReaderOptions::default()
-                .with_emit_chunks(true)
-                .with_record_length_limit(MAX_RECORD_BYTES),
-        );
+        let mut reader =
+            LinearReader::new_with_options(options.with_record_length_limit(MAX_RECORD_BYTES));
         let mut fed: u64 = 0;
         while let Some(event) = reader.next_event() {
             match event.map_err(|e| self.mcap_err(fed, &e))? {
@@ -190,10 +210,9 @@ impl McapFile {
                     fed += n as u64;
                     reader.notify_read(n);
                 }
-                // The whole file: a chunk after the data end is still read by `scan`.
                 LinearReadEvent::Record { opcode, data } => {
-                    if opcode == op::CHUNK {
-                        check_chunk(data).map_err(|why| self.corrupt(fed, why))?;
+                    if !on_record(opcode, data, fed)? {
+                        break;
                     }
                 }
             }
@@ -477,36 +496,21 @@ impl McapFile {
 impl McapFile {
     /// Every metadata record of the data section, in file order.
     fn metadata_records(&self) -> Result<Vec<super::MetadataRecord>, SourceError> {
-        let mut file = File::open(&self.file).map_err(|e| self.io(e))?;
-        let mut reader = LinearReader::new_with_options(
-            LinearReaderOptions::default().with_record_length_limit(MAX_RECORD_BYTES),
-        );
         let mut out = Vec::new();
-        let mut fed: u64 = 0;
-        while let Some(event) = reader.next_event() {
-            match event.map_err(|e| self.mcap_err(fed, &e))? {
-                LinearReadEvent::ReadRequest(need) => {
-                    let buf = reader.insert(need.clamp(1, READ_PIECE));
-                    let n = file.read(buf).map_err(|e| self.io(e))?;
-                    fed += n as u64;
-                    reader.notify_read(n);
-                }
-                LinearReadEvent::Record { opcode, data } => {
-                    if opcode == op::DATA_END {
-                        break;
-                    }
-                    if opcode != op::METADATA {
-                        continue;
-                    }
-                    check_prefixes(opcode, data).map_err(|why| self.corrupt(fed, why))?;
-                    if let Record::Metadata(m) =
-                        mcap::parse_record(opcode, data).map_err(|e| self.mcap_err(fed, &e))?
-                    {
-                        out.push((m.name, m.metadata));
-                    }
+        self.records(LinearReaderOptions::default(), &mut |opcode, data, fed| {
+            if opcode == op::DATA_END {
+                return Ok(false);
+            }
+            if opcode == op::METADATA {
+                check_prefixes(opcode, data).map_err(|why| self.corrupt(fed, why))?;
+                if let Record::Metadata(m) =
+                    mcap::parse_record(opcode, data).map_err(|e| self.mcap_err(fed, &e))?
+                {
+                    out.push((m.name, m.metadata));
                 }
             }
-        }
+            Ok(true)
+        })?;
         Ok(out)
     }
 }
