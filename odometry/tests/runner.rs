@@ -48,6 +48,19 @@ fn frame_t(n: usize) -> f64 {
     n as f64 * RADAR_DT + RADAR_OFFSET
 }
 
+/// Pushes frames `n..` (points from `points`) while they are at or before `t` \[s\].
+fn push_frames_to(r: &mut Runner, n: &mut usize, t: f64, points: &impl Fn(usize) -> Vec<Point>) {
+    while frame_t(*n) <= t {
+        let pts = points(*n);
+        r.push_radar(&FrameInput {
+            t: frame_t(*n),
+            id: *n as u64,
+            points: &pts,
+        });
+        *n += 1;
+    }
+}
+
 #[test]
 fn the_health_rule() {
     assert!(!guided(GUIDE_AFTER_UPDATES - 1, 0));
@@ -150,15 +163,7 @@ fn offline_and_runtime_order_give_the_same_poses() {
     let mut n = 0;
     for k in 0..(4.0 / IMU_DT) as usize {
         let s = imu(k);
-        while frame_t(n) <= s.t {
-            let pts = points(n);
-            r.push_radar(&FrameInput {
-                t: frame_t(n),
-                id: n as u64,
-                points: &pts,
-            });
-            n += 1;
-        }
+        push_frames_to(&mut r, &mut n, s.t, &points);
         r.push_imu(s);
         while let Some(p) = r.pop_pose() {
             offline.push(p);
@@ -302,15 +307,7 @@ fn sparse_turning_walk(
             gyro: [0.0, 0.0, w],
         };
         r.push_imu(s);
-        while frame_t(n) <= s.t {
-            let pts = frame(n);
-            r.push_radar(&FrameInput {
-                t: frame_t(n),
-                id: n as u64,
-                points: &pts,
-            });
-            n += 1;
-        }
+        push_frames_to(&mut r, &mut n, s.t, &frame);
         while let Some(p) = r.pop_pose() {
             poses.push(p);
         }
