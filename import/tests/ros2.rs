@@ -373,6 +373,45 @@ fn corrupt_chunk_is_an_error_but_the_summary_still_lists_topics() {
 }
 
 #[test]
+fn a_chunk_overrunning_itself_stops_reading_there_after_the_messages_before_it() {
+    let Some((dir, manifest)) = fixtures() else {
+        return;
+    };
+    let name = "plain_none.mcap";
+    let mut bytes = std::fs::read(dir.join(name)).unwrap();
+    let want = expected(manifest, name);
+    // The last message's record (uncompressed chunks, small: earlier messages lie in earlier
+    // chunks) claims 1 MiB, far more than its chunk holds. Its header sits 9 + 22 bytes (channel,
+    // sequence, log and publish time) before its payload.
+    let k = want.len() - 1;
+    let payload = &want[k].data;
+    let at = bytes
+        .windows(payload.len())
+        .position(|w| w == &payload[..])
+        .expect("payload in the file")
+        - 31;
+    assert_eq!(bytes[at], 0x05, "a message record's opcode");
+    bytes[at + 1..at + 9].copy_from_slice(&(1u64 << 20).to_le_bytes());
+    let scratch = tempfile::tempdir().unwrap();
+    let p = scratch.path().join(name);
+    std::fs::write(&p, &bytes).unwrap();
+    let mut f = McapFile::open(&p).unwrap();
+    let mut got = Vec::new();
+    let e = read_into(&mut f, &[], &mut got).expect_err("the chunk overruns itself");
+    let (path, chunk_at, why) = corrupt_of(&e);
+    assert_eq!(path, p);
+    assert!(why.contains("claims 1048576 B"), "{e}");
+    assert!(chunk_at < at as u64, "{e}");
+    // Everything before that chunk came out, and came out right.
+    assert!(
+        !got.is_empty() && got.len() < want.len(),
+        "{} messages",
+        got.len()
+    );
+    assert_eq!(got[..], want[..got.len()]);
+}
+
+#[test]
 fn flipped_bytes_never_panic() {
     let Some((dir, _)) = fixtures() else {
         return;

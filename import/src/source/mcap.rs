@@ -49,6 +49,10 @@ pub struct McapFile {
     size: u64,
     /// `file` is a decompressed copy of `path`: offsets in errors are into the decompressed data.
     decompressed: bool,
+    /// The first uncompressed chunk whose records overrun it: its offset \[B\] and what is wrong.
+    /// No reader is fed that chunk's bytes (see [`McapFile::check_chunks`]); reading stops
+    /// there with this error, after everything before it.
+    bad_chunk: Option<(u64, String)>,
 }
 
 /// A channel as the reader resolved it.
@@ -163,31 +167,57 @@ impl McapFile {
                 }
             });
         }
-        let m = McapFile {
+        let mut m = McapFile {
             path: path.into(),
             file: file.into(),
             size,
             decompressed: file != path,
+            bad_chunk: None,
         };
-        m.check_chunks()?;
+        m.bad_chunk = m.check_chunks();
         Ok(m)
     }
 
-    /// Walks the records inside every uncompressed chunk before the reader iterates them: the
+    /// The first uncompressed chunk whose records overrun it: its offset \[B\] and why. The
     /// `mcap` crate's reader subtracts an inner record's length from what is left of its chunk
     /// without checking it (a record claiming more than the chunk holds underflows: a panic with
-    /// overflow checks, a runaway read without). Found by the fuzz target `import_mcap`.
-    fn check_chunks(&self) -> Result<(), SourceError> {
-        // The whole file: a chunk after the data end is still read by `scan`.
-        self.records(
-            LinearReaderOptions::default().with_emit_chunks(true),
-            &mut |opcode, data, fed| {
-                if opcode == op::CHUNK {
-                    check_chunk(data).map_err(|why| self.corrupt(fed, why))?;
-                }
-                Ok(true)
-            },
-        )
+    /// overflow checks, a runaway read without; found by the fuzz target `import_mcap`), so such
+    /// a chunk must never reach it. The whole file is walked (`scan` reads a chunk after the data
+    /// end too), by record headers only: no chunk is loaded. Other damage (a cut file, an absurd
+    /// length) ends the walk without an error here: the readers report it where they meet it,
+    /// after delivering what came before.
+    fn check_chunks(&self) -> Option<(u64, String)> {
+        let file = File::open(&self.file).ok()?;
+        find_bad_chunk(&mut Walk::new(file)).ok().flatten()
+    }
+
+    /// Hands `reader` the next bytes of `file` it asks for (`need`, at most [`READ_PIECE`]),
+    /// counting them in `fed`, but never the bytes of a bad chunk: there, that chunk's error.
+    fn feed(
+        &self,
+        reader: &mut LinearReader,
+        file: &mut File,
+        need: usize,
+        fed: &mut u64,
+    ) -> Result<(), SourceError> {
+        let mut want = need.clamp(1, READ_PIECE);
+        if let Some((start, why)) = &self.bad_chunk {
+            if *fed >= *start {
+                return Err(self.corrupt(*start, why.clone()));
+            }
+            want = want.min(usize::try_from(start - *fed).unwrap_or(usize::MAX));
+        }
+        let buf = reader.insert(want);
+        let n = loop {
+            match file.read(buf) {
+                Ok(n) => break n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(self.io(e)),
+            }
+        };
+        *fed += n as u64;
+        reader.notify_read(n);
+        Ok(())
     }
 
     /// Reads the file through a linear reader with `options` (and the record length limit),
@@ -205,10 +235,7 @@ impl McapFile {
         while let Some(event) = reader.next_event() {
             match event.map_err(|e| self.mcap_err(fed, &e))? {
                 LinearReadEvent::ReadRequest(need) => {
-                    let buf = reader.insert(need.clamp(1, READ_PIECE));
-                    let n = file.read(buf).map_err(|e| self.io(e))?;
-                    fed += n as u64;
-                    reader.notify_read(n);
+                    self.feed(&mut reader, &mut file, need, &mut fed)?
                 }
                 LinearReadEvent::Record { opcode, data } => {
                     if !on_record(opcode, data, fed)? {
@@ -290,16 +317,7 @@ impl McapFile {
             let event = event.map_err(|e| self.mcap_err(fed, &e))?;
             match event {
                 LinearReadEvent::ReadRequest(need) => {
-                    let buf = reader.insert(need.clamp(1, READ_PIECE));
-                    let n = loop {
-                        match file.read(buf) {
-                            Ok(n) => break n,
-                            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                            Err(e) => return Err(self.io(e).into()),
-                        }
-                    };
-                    fed += n as u64;
-                    reader.notify_read(n);
+                    self.feed(&mut reader, &mut file, need, &mut fed)?
                 }
                 LinearReadEvent::Record { opcode, data } => {
                     if opcode == op::DATA_END {
@@ -583,61 +601,118 @@ impl Source for McapFile {
     }
 }
 
-/// Checks that every length prefix of a schema or channel record fits the record: schema `u16 id,
-/// string name, string encoding`; channel `u16 id, u16 schema id, string topic, string message
-/// encoding, map metadata` (a string or map is `u32 len` + that many bytes). The schema's data
-/// length the crate checks itself; message records have no prefix before their data.
-/// An uncompressed chunk's records (opcode, u64 length, body) each within the chunk: the
-/// chunk's header (start and end time, uncompressed size, CRC, compression, records length) is
-/// read as the `mcap` reader reads it; compressed chunks are left to the decompressor's own checks.
-fn check_chunk(body: &[u8]) -> Result<(), String> {
-    let u64_at = |at: usize| {
-        body.get(at..at + 8)
-            .map(|b| u64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
-    };
-    let cut = |what: &str, at: usize| {
-        format!(
-            "chunk: its {what} at byte {at} is cut (the chunk has {} B)",
-            body.len()
-        )
-    };
-    let comp_len = body
-        .get(28..32)
-        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
-        .ok_or_else(|| cut("compression", 28))?;
-    let at = 32usize
-        .checked_add(comp_len)
-        .filter(|&a| a <= body.len())
-        .ok_or_else(|| cut("compression name", 32))?;
-    if comp_len > 0 {
-        return Ok(());
-    }
-    let records = u64_at(at).ok_or_else(|| cut("records length", at))?;
-    let start = at + 8;
-    let left = (body.len() - start) as u64;
-    if records > left {
-        return Err(format!(
-            "chunk: its records claim {records} B at byte {start}, the chunk has {left} B"
-        ));
-    }
-    let end = start + records as usize;
-    let mut k = start;
-    while k < end {
-        let len = u64_at(k + 1)
-            .filter(|_| k + 9 <= end)
-            .ok_or_else(|| cut("record header", k))?;
-        if len > (end - k - 9) as u64 {
-            return Err(format!(
-                "chunk: its record at byte {k} (opcode {:#04x}) claims {len} B, {} B are left",
-                body[k],
-                end - k - 9
-            ));
-        }
-        k += 9 + len as usize;
-    }
-    Ok(())
+/// Reads a file by offset through a buffer: record headers are small and close together.
+struct Walk<R> {
+    r: std::io::BufReader<R>,
+    /// Where `r` stands \[B\].
+    at: u64,
 }
 
+impl<R: Read + Seek> Walk<R> {
+    fn new(r: R) -> Walk<R> {
+        Walk {
+            r: std::io::BufReader::new(r),
+            at: 0,
+        }
+    }
+
+    /// `buf.len()` bytes at `pos`; `false` where the file ends first.
+    fn read_at(&mut self, pos: u64, buf: &mut [u8]) -> std::io::Result<bool> {
+        match i64::try_from(pos.wrapping_sub(self.at)) {
+            Ok(d) if pos >= self.at => self.r.seek_relative(d)?,
+            _ => {
+                self.r.seek(SeekFrom::Start(pos))?;
+            }
+        }
+        self.at = pos;
+        let mut n = 0;
+        while n < buf.len() {
+            match self.r.read(&mut buf[n..]) {
+                Ok(0) => break,
+                Ok(k) => n += k,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
+        self.at += n as u64;
+        Ok(n == buf.len())
+    }
+}
+
+/// The first chunk (offset \[B\], why) among the top-level records after the magic that
+/// [`check_chunk`] refuses; `None` where the walk reaches the footer or the file's end first.
+fn find_bad_chunk<R: Read + Seek>(w: &mut Walk<R>) -> std::io::Result<Option<(u64, String)>> {
+    let mut pos = MAGIC.len() as u64;
+    let mut head = [0u8; 9];
+    while w.read_at(pos, &mut head)? {
+        let len = u64::from_le_bytes(head[1..].try_into().expect("8 bytes"));
+        match head[0] {
+            op::CHUNK => {
+                if let Err(why) = check_chunk(w, pos + 9, len)? {
+                    return Ok(Some((pos, why)));
+                }
+            }
+            op::FOOTER => break,
+            _ => {}
+        }
+        match pos.checked_add(len).and_then(|p| p.checked_add(9)) {
+            Some(p) => pos = p,
+            None => break,
+        }
+    }
+    Ok(None)
+}
+
+/// Checks an uncompressed chunk whose body (`len` B) starts at `start`: each record inside
+/// (opcode, u64 length, body) must fit in what the chunk's records length leaves, as the
+/// `mcap` reader counts it down. The header (start and end time, uncompressed size, CRC,
+/// compression, records length) is read as that reader reads it. Only what the file holds is
+/// checked, so a cut file is not refused here (the reader reports the cut); whatever the reader
+/// itself refuses before counting down (a header longer than the chunk, records longer than it,
+/// a record over the length limit) is left to it; compressed chunks are left to the
+/// decompressor's own checks.
+fn check_chunk<R: Read + Seek>(
+    w: &mut Walk<R>,
+    start: u64,
+    len: u64,
+) -> std::io::Result<Result<(), String>> {
+    let mut head = [0u8; 40];
+    if !w.read_at(start, &mut head)? {
+        return Ok(Ok(()));
+    }
+    let comp_len = u32::from_le_bytes(head[28..32].try_into().expect("4 bytes"));
+    if comp_len > 0 || len < 40 {
+        return Ok(Ok(()));
+    }
+    let mut left = u64::from_le_bytes(head[32..40].try_into().expect("8 bytes"));
+    if left > len - 40 {
+        return Ok(Ok(()));
+    }
+    let mut k = 40u64;
+    let mut rec = [0u8; 9];
+    while left > 0 && w.read_at(start + k, &mut rec)? {
+        let n = u64::from_le_bytes(rec[1..].try_into().expect("8 bytes"));
+        if n > MAX_RECORD_BYTES as u64 {
+            break;
+        }
+        if n + 9 > left {
+            return Ok(Err(format!(
+                "chunk: its record at byte {k} (opcode {:#04x}) claims {n} B, {} B are left",
+                rec[0],
+                left.saturating_sub(9)
+            )));
+        }
+        left -= n + 9;
+        k += n + 9;
+    }
+    Ok(Ok(()))
+}
+
+/// Checks that every length prefix of a schema, channel or metadata record fits the record:
+/// schema `u16 id, string name, string encoding`; channel `u16 id, u16 schema id, string topic,
+/// string message encoding, map metadata`; metadata `string name, map metadata` (a string or map
+/// is `u32 len` + that many bytes; a map's entries are key/value string pairs within it). The
+/// schema's data length the crate checks itself; message records have no prefix before their data.
 fn check_prefixes(opcode: u8, body: &[u8]) -> Result<(), String> {
     let (what, fixed, prefixed): (&str, usize, &[&str]) = match opcode {
         op::SCHEMA => ("schema", 2, &["name", "encoding"]),
@@ -772,8 +847,17 @@ mod tests {
         let mut bytes = b"\x89MCAP0\r\n".to_vec();
         bytes.extend(tail);
         std::fs::write(&p, bytes).unwrap();
-        let r = McapFile::open(&p).and_then(|mut f| f.metadata());
-        assert!(r.is_err(), "{r:?}");
+        // The file opens (a cut or damaged file still gives what comes before the damage); the
+        // chunk's bytes never reach the reader, and reading stops at it with its offset.
+        let mut f = McapFile::open(&p).unwrap();
+        for r in [f.metadata().map(|_| ()), f.topics().map(|_| ())] {
+            match r {
+                Err(SourceError::Corrupt { at: 8, why, .. }) => {
+                    assert!(why.contains("claims"), "{why}")
+                }
+                r => panic!("expected the chunk's error at byte 8, got {r:?}"),
+            }
+        }
         // The second one: the same kind of chunk after a data-end record.
         let tail: &[u8] = &[
             15, 7, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 118, 0, 6, 0, 64, 0, 0, 0, 0, 0, 0, 0, 0, 0,
@@ -793,12 +877,23 @@ mod tests {
         chunk.push(op::MESSAGE);
         chunk.extend(100u64.to_le_bytes()); // claims 100 B
         chunk.extend([0u8; 3]);
-        let e = check_chunk(&chunk).unwrap_err();
-        assert!(e.contains("claims 100 B, 3 B are left"), "{e}");
-        // The same record fitting is fine.
+        // The chunk's bytes as the file holds them (cut or not), and its length as its header
+        // claims.
         let n = chunk.len();
+        let check = |bytes: &[u8]| {
+            let mut w = Walk::new(std::io::Cursor::new(bytes.to_vec()));
+            check_chunk(&mut w, 0, n as u64).unwrap()
+        };
+        let e = check(&chunk).unwrap_err();
+        assert!(e.contains("claims 100 B, 3 B are left"), "{e}");
+        // Cut inside the record's body: still refused (its header alone says it overruns).
+        assert!(check(&chunk[..n - 2]).is_err());
+        // Cut inside its header: nothing to check (the reader reports the cut).
+        assert_eq!(check(&chunk[..n - 5]), Ok(()));
+        // The same record fitting is fine, and so is a cut inside it.
         chunk[n - 11..n - 3].copy_from_slice(&3u64.to_le_bytes());
-        assert_eq!(check_chunk(&chunk), Ok(()));
+        assert_eq!(check(&chunk), Ok(()));
+        assert_eq!(check(&chunk[..n - 1]), Ok(()));
     }
 
     #[test]
