@@ -15,7 +15,7 @@ use crate::summary::{
     ClockSummary, Clocks, Drops, FramesIn, FramesOut, LatencySummary, Plausibility, Ports,
     RunSummary, SyncSummary,
 };
-use crate::sync::{SyncConfig, SyncCounters, SyncOut, Synchroniser};
+use crate::sync::{FeedOrder, SyncConfig, SyncCounters, SyncOut, Synchroniser};
 use crate::view::{ViewEvent, ViewStatus, ViewTap};
 use imu_driver::TimeWrap;
 use milliego_session::streams::StreamReport;
@@ -660,6 +660,8 @@ fn spawn_sync(
         sync.offline_clock = offline && !session_online_clock;
         sync.data_time = offline;
         let mut hist = Histogram::default();
+        // Offline: the feeder's order, rebuilt item by item (see `FeedOrder`).
+        let mut feed = FeedOrder::new(sh2.imu_q.capacity(), sh2.radar_q.capacity());
         loop {
             let done = sh2.inputs_done.load(Ordering::Acquire);
             let watermark = f64::from_bits(sh2.watermark.load(Ordering::Acquire));
@@ -669,20 +671,24 @@ fn spawn_sync(
             // queue fills.
             for _ in 0..sh2.imu_q.len() {
                 let Some(s) = sh2.imu_q.pop() else { break };
-                sync.push_imu(s);
+                if offline {
+                    feed.push_imu(s);
+                } else {
+                    sync.push_imu(s);
+                }
                 any = true;
             }
             for _ in 0..sh2.radar_q.len() {
                 let Some(r) = sh2.radar_q.pop() else { break };
-                sync.push_radar(r, |b| sh2.pool.give(b));
+                if offline {
+                    feed.push_radar(r);
+                } else {
+                    sync.push_radar(r, |b| sh2.pool.give(b));
+                }
                 any = true;
             }
-            let now = if offline {
-                watermark
-            } else {
-                sh2.epoch.elapsed().as_secs_f64()
-            };
-            let emit = |ev: SyncOut| {
+            let finished = done && sh2.imu_q.is_empty() && sh2.radar_q.is_empty();
+            let mut emit = |ev: SyncOut| {
                 let read_ns = match &ev {
                     SyncOut::Imu { read_ns, .. } => Some(*read_ns),
                     SyncOut::Radar { item, .. } => Some(item.read_ns),
@@ -697,10 +703,14 @@ fn spawn_sync(
                     recycle(&sh2, old);
                 }
             };
-            if now.is_finite() {
-                sync.poll(now, emit);
+            if offline {
+                // Once the feeder is done, everything it fed has been taken.
+                let upto = if finished { f64::INFINITY } else { watermark };
+                feed.release(upto, &mut sync, |b| sh2.pool.give(b), &mut emit);
+            } else {
+                sync.poll(sh2.epoch.elapsed().as_secs_f64(), &mut emit);
             }
-            if done && sh2.imu_q.is_empty() && sh2.radar_q.is_empty() {
+            if finished && feed.is_empty() {
                 sync.flush(|ev| sh2.ev_q.push_wait(ev));
                 break;
             }
@@ -1104,6 +1114,7 @@ fn feed_session(
         it.read_ns = sh.now_ns();
         it.set_frame(f.sensor_s, f.frame_number, f.bytes, &f.cloud);
         it.t = (!online_clock).then_some(tr);
+        it.fed_s = Some(tr);
         sh.radar_q.push_wait(it);
         decoded[0].fetch_add(1, Ordering::Relaxed);
         sh.watermark.store(tr.to_bits(), Ordering::Release);
@@ -1140,6 +1151,7 @@ fn feed_session(
             gyro: s.gyro,
             bytes: s.bytes,
             t: (!online_clock).then_some(t),
+            fed_s: Some(t),
             pressure,
         };
         sh.imu_q.push_wait(it);

@@ -32,6 +32,9 @@ pub struct RadarItem {
     pub processing_s: f64,
     /// Measurement time on the common clock \[s\], once known (offline feeders set it).
     pub t: Option<f64>,
+    /// Offline feeders: the frame's place in the feed, a time on the common clock \[s\] (see
+    /// [`crate::sync::FeedOrder`]); `None` for live reads.
+    pub fed_s: Option<f64>,
     /// Points.
     pub points: Vec<Point>,
     /// SNR per point \[dB\], when the frame carries side info (else empty).
@@ -73,6 +76,7 @@ impl Default for RadarItem {
             bytes: 0,
             processing_s: 0.0,
             t: None,
+            fed_s: None,
             points: Vec::with_capacity(POINTS_RESERVED),
             snr_db: Vec::with_capacity(POINTS_RESERVED),
         }
@@ -96,6 +100,9 @@ pub struct ImuItem {
     pub bytes: usize,
     /// Time on the common clock \[s\], once known (offline feeders set it).
     pub t: Option<f64>,
+    /// Offline feeders: the sample's place in the feed, a time on the common clock \[s\] (see
+    /// [`crate::sync::FeedOrder`]); `None` for live reads.
+    pub fed_s: Option<f64>,
     /// The barometer reading that came since the previous sample, if any: its SampleTimeFine
     /// \[s\] and pressure \[Pa\] (the estimator takes it just before this sample).
     pub pressure: Option<(f64, f64)>,
@@ -185,6 +192,7 @@ fn fill(it: &mut RadarItem, f: &Decoded<'_, (f64, u64)>) {
     (it.host_s, it.read_ns) = f.stamp;
     it.set_frame(f.sensor_s, f.frame_number, f.bytes, f.cloud);
     it.t = None;
+    it.fed_s = None;
 }
 
 /// The live IMU decoder: the drivers' streaming [`imu_driver::host::Decoder`], the same that
@@ -242,6 +250,7 @@ impl ImuDecoder {
                     gyro: s.gyro,
                     bytes: s.bytes,
                     t: None,
+                    fed_s: None,
                     pressure: held.take(),
                 })
             },

@@ -6,4 +6,4 @@ pub mod clock;
 pub mod order;
 
 pub use clock::{tx_s, ClockConfig, OnlineClock};
-pub use order::{SyncConfig, SyncCounters, SyncOut, Synchroniser};
+pub use order::{FeedOrder, SyncConfig, SyncCounters, SyncOut, Synchroniser};

@@ -518,9 +518,189 @@ impl Synchroniser {
     }
 }
 
+/// Rebuilds the order an offline feeder pushed a session's items in, and drives the
+/// [`Synchroniser`] with it, item by item.
+///
+/// The feeder pushes both streams in time order (each radar frame before the first IMU sample
+/// at or after its time) through two queues, so the thread on the other side sees them in
+/// batches whose sizes depend on how the two threads interleave. Polled once per batch, at the
+/// feeder's watermark, the synchroniser would judge stalls (a gap in the IMU) at whatever time
+/// the batch happened to end: in a gap it would release the radar frames at once (no IMU),
+/// after the gap it would release them behind the first sample past them, and the estimators
+/// would see a different order from run to run. Here each item goes in at its feed time
+/// ([`ImuItem::fed_s`], [`RadarItem::fed_s`]), and the synchroniser is polled at that time: what
+/// it releases depends on the session alone, as if it ran in the feeder's thread.
+#[derive(Debug)]
+pub struct FeedOrder {
+    imu: VecDeque<ImuItem>,
+    radar: VecDeque<Box<RadarItem>>,
+}
+
+impl FeedOrder {
+    /// Holds up to the queues' capacities without allocating.
+    pub fn new(imu_capacity: usize, radar_capacity: usize) -> FeedOrder {
+        FeedOrder {
+            imu: VecDeque::with_capacity(imu_capacity),
+            radar: VecDeque::with_capacity(radar_capacity),
+        }
+    }
+
+    /// Takes an IMU sample as it came off its queue.
+    pub fn push_imu(&mut self, s: ImuItem) {
+        self.imu.push_back(s);
+    }
+
+    /// Takes a radar frame as it came off its queue.
+    pub fn push_radar(&mut self, r: Box<RadarItem>) {
+        self.radar.push_back(r);
+    }
+
+    /// Nothing is held.
+    pub fn is_empty(&self) -> bool {
+        self.imu.is_empty() && self.radar.is_empty()
+    }
+
+    /// Hands `sync` every held item fed at or before `upto` \[s\] (the feeder's watermark read
+    /// before the queues were drained: everything fed up to it has been taken), in feed order (a
+    /// radar frame before an IMU sample of the same time), polling it at each item's feed time.
+    /// Items without a feed time (or a NaN one) go first. Returns whether anything went.
+    pub fn release(
+        &mut self,
+        upto: f64,
+        sync: &mut Synchroniser,
+        mut recycle: impl FnMut(Box<RadarItem>),
+        mut emit: impl FnMut(SyncOut),
+    ) -> bool {
+        let fed = |t: Option<f64>| t.filter(|t| !t.is_nan()).unwrap_or(f64::NEG_INFINITY);
+        let mut any = false;
+        loop {
+            let ti = self.imu.front().map(|s| fed(s.fed_s));
+            let tr = self.radar.front().map(|r| fed(r.fed_s));
+            let radar_next = match (tr, ti) {
+                (Some(r), Some(i)) => r <= i,
+                (Some(_), None) => true,
+                (None, _) => false,
+            };
+            let t = if radar_next { tr } else { ti };
+            let Some(t) = t.filter(|&t| t <= upto) else {
+                return any;
+            };
+            if radar_next {
+                if let Some(r) = self.radar.pop_front() {
+                    sync.push_radar(r, &mut recycle);
+                }
+            } else if let Some(s) = self.imu.pop_front() {
+                sync.push_imu(s);
+            }
+            any = true;
+            if t.is_finite() {
+                sync.poll(t, &mut emit);
+            }
+        }
+    }
+}
+
 /// The barometer reading carried by `s` on the common clock: the sample's time `t` \[s\] less
 /// the SampleTimeFine between reading and sample (one device clock).
 fn pressure_at(s: &ImuItem, t: f64) -> Option<(f64, f64)> {
     s.pressure
         .map(|(sensor_s, pa)| (t - (s.sensor_s - sensor_s).max(0.0), pa))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A session's feed: IMU at 100 Hz for 3 s with a 0.6 s gap from 1.0 s, radar at 10 Hz
+    /// from 0.05 s, in the feeder's order (each frame before the first sample at or after it).
+    fn session() -> Vec<(bool, f64)> {
+        let imu = (0..300)
+            .map(|k| k as f64 * 0.01)
+            .filter(|t| !(1.0..1.6).contains(t));
+        let radar: Vec<f64> = (0..30).map(|k| 0.05 + k as f64 * 0.1).collect();
+        let mut out = Vec::new();
+        let mut next = 0;
+        for t in imu {
+            while next < radar.len() && radar[next] <= t {
+                out.push((true, radar[next]));
+                next += 1;
+            }
+            out.push((false, t));
+        }
+        out.extend(radar[next..].iter().map(|&t| (true, t)));
+        out
+    }
+
+    /// What the synchroniser released (kind, time \[s\], health) when the feed arrives in
+    /// batches of the given sizes, each released up to its last item's time (the watermark).
+    fn released(batches: &[usize]) -> Vec<(char, f64, u16)> {
+        let feed = session();
+        let mut sync = Synchroniser::new(SyncConfig {
+            radar_period_s: Some(0.1),
+            ..SyncConfig::default()
+        });
+        sync.offline_clock = true;
+        sync.data_time = true;
+        let mut order = FeedOrder::new(64, 8);
+        let mut out = Vec::new();
+        let mut emit = |ev: SyncOut| {
+            out.push(match ev {
+                SyncOut::Imu { input, health, .. } => ('i', input.t, health.0),
+                SyncOut::Radar { item, health } => ('r', item.t.unwrap_or(f64::NAN), health.0),
+                SyncOut::Tick { t, health } => ('t', t, health.0),
+                SyncOut::Preview { input, health, .. } => ('p', input.t, health.0),
+            })
+        };
+        let mut k = 0;
+        for &n in batches.iter().cycle() {
+            if k >= feed.len() {
+                break;
+            }
+            let end = (k + n).min(feed.len());
+            // The radar queue is drained after the IMU queue: within a batch, IMU samples come
+            // first, as the thread takes them.
+            let mut batch: Vec<_> = feed[k..end].to_vec();
+            batch.sort_by_key(|x| x.0);
+            for &(radar, t) in &batch {
+                if radar {
+                    order.push_radar(Box::new(RadarItem {
+                        t: Some(t),
+                        fed_s: Some(t),
+                        ..RadarItem::default()
+                    }));
+                } else {
+                    order.push_imu(ImuItem {
+                        t: Some(t),
+                        fed_s: Some(t),
+                        ..ImuItem::default()
+                    });
+                }
+            }
+            let watermark = feed[end - 1].1;
+            order.release(watermark, &mut sync, drop, &mut emit);
+            k = end;
+        }
+        order.release(f64::INFINITY, &mut sync, drop, &mut emit);
+        assert!(order.is_empty());
+        sync.flush(&mut emit);
+        out
+    }
+
+    #[test]
+    fn what_a_session_releases_does_not_depend_on_how_the_feed_is_batched() {
+        let one_by_one = released(&[1]);
+        // Every item comes out once, the radar frames in the gap among them.
+        assert_eq!(one_by_one.iter().filter(|e| e.0 == 'i').count(), 240);
+        assert_eq!(one_by_one.iter().filter(|e| e.0 == 'r').count(), 30);
+        // The gap is seen: the IMU is declared missing inside it.
+        let missing = Health::IMU_MISSING.0;
+        assert!(one_by_one.iter().any(|e| e.2 & missing != 0));
+        for batches in [&[7][..], &[64], &[3, 50, 1, 120], &[1000]] {
+            let got = released(batches);
+            assert_eq!(got.len(), one_by_one.len(), "batches {batches:?}");
+            for (a, b) in got.iter().zip(&one_by_one) {
+                assert_eq!(a, b, "batches {batches:?}");
+            }
+        }
+    }
 }
