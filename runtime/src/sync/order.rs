@@ -57,7 +57,8 @@ pub struct SyncConfig {
     pub imu_baud: u32,
     /// Half the active chirping of a frame \[s\].
     pub half_chirps_s: f64,
-    /// Longest an IMU sample waits for a radar frame due before it \[s\].
+    /// Longest an IMU sample waits for a radar frame due before it \[s\]; a radar frame waits
+    /// for the IMU to pass it this long plus one frame period.
     pub max_hold_s: f64,
     /// Whether a radar stream is expected at all.
     pub radar_enabled: bool,
@@ -126,6 +127,9 @@ pub struct Synchroniser {
     start_host: Option<f64>,
     radar_missing: bool,
     imu_missing: bool,
+    /// How long the IMU has been silent at the last poll \[s\] (host or data time, as stalls
+    /// are judged).
+    imu_silent_s: f64,
     last_tick: f64,
     imu_done_t: Option<f64>,
     released_t: f64,
@@ -173,6 +177,7 @@ impl Synchroniser {
             start_host: None,
             radar_missing: false,
             imu_missing: false,
+            imu_silent_s: 0.0,
             last_tick: f64::NEG_INFINITY,
             imu_done_t: None,
             released_t: f64::NEG_INFINITY,
@@ -339,9 +344,9 @@ impl Synchroniser {
         let rm = self.cfg.radar_enabled
             && now - last_radar.unwrap_or(start)
                 > self.cfg.stall_periods * self.radar_period() + margin;
+        self.imu_silent_s = now - last_imu.unwrap_or(start);
         let im = self.cfg.imu_enabled
-            && now - last_imu.unwrap_or(start)
-                > self.cfg.stall_periods * self.imu_period() + margin;
+            && self.imu_silent_s > self.cfg.stall_periods * self.imu_period() + margin;
         if rm && !self.radar_missing {
             self.counters.radar_gaps += 1;
             tracing::warn!(now, "radar missing");
@@ -401,9 +406,13 @@ impl Synchroniser {
             if let Some(r) = self.radar.front() {
                 let rt = r.t.unwrap_or(0.0);
                 let late = self.imu_done_t.is_some_and(|ti| rt <= ti);
-                let no_imu = !self.cfg.imu_enabled
-                    || self.imu_missing
-                    || now - rt > self.cfg.max_hold_s + self.radar_period();
+                // A frame waits for the IMU to pass it at most the hold time (and a frame
+                // period): across a short gap in the IMU it then goes behind the first sample
+                // after the gap, as offline, and the filter integrates the IMU over the gap
+                // instead of dead-reckoning the frame from its Doppler alone. Once the IMU has
+                // been silent for longer, frames go at once.
+                let hold = self.cfg.max_hold_s + self.radar_period();
+                let no_imu = !self.cfg.imu_enabled || now - rt > hold || self.imu_silent_s > hold;
                 if late || (no_imu && self.imu.is_empty()) {
                     if let Some(item) = self.radar.pop_front() {
                         self.counters.radar_late += u64::from(late);
@@ -611,12 +620,13 @@ fn pressure_at(s: &ImuItem, t: f64) -> Option<(f64, f64)> {
 mod tests {
     use super::*;
 
-    /// A session's feed: IMU at 100 Hz for 3 s with a 0.6 s gap from 1.0 s, radar at 10 Hz
-    /// from 0.05 s, in the feeder's order (each frame before the first sample at or after it).
-    fn session() -> Vec<(bool, f64)> {
+    /// A session's feed: IMU at 100 Hz for 3 s with a gap of `gap` \[s\] from 1.0 s, radar at
+    /// 10 Hz from 0.05 s, in the feeder's order (each frame before the first sample at or after
+    /// it).
+    fn session(gap: f64) -> Vec<(bool, f64)> {
         let imu = (0..300)
             .map(|k| k as f64 * 0.01)
-            .filter(|t| !(1.0..1.6).contains(t));
+            .filter(|t| !(1.0..1.0 + gap - 1e-9).contains(t));
         let radar: Vec<f64> = (0..30).map(|k| 0.05 + k as f64 * 0.1).collect();
         let mut out = Vec::new();
         let mut next = 0;
@@ -633,8 +643,8 @@ mod tests {
 
     /// What the synchroniser released (kind, time \[s\], health) when the feed arrives in
     /// batches of the given sizes, each released up to its last item's time (the watermark).
-    fn released(batches: &[usize]) -> Vec<(char, f64, u16)> {
-        let feed = session();
+    fn released(gap: f64, batches: &[usize]) -> Vec<(char, f64, u16)> {
+        let feed = session(gap);
         let mut sync = Synchroniser::new(SyncConfig {
             radar_period_s: Some(0.1),
             ..SyncConfig::default()
@@ -688,7 +698,7 @@ mod tests {
 
     #[test]
     fn what_a_session_releases_does_not_depend_on_how_the_feed_is_batched() {
-        let one_by_one = released(&[1]);
+        let one_by_one = released(0.6, &[1]);
         // Every item comes out once, the radar frames in the gap among them.
         assert_eq!(one_by_one.iter().filter(|e| e.0 == 'i').count(), 240);
         assert_eq!(one_by_one.iter().filter(|e| e.0 == 'r').count(), 30);
@@ -696,11 +706,37 @@ mod tests {
         let missing = Health::IMU_MISSING.0;
         assert!(one_by_one.iter().any(|e| e.2 & missing != 0));
         for batches in [&[7][..], &[64], &[3, 50, 1, 120], &[1000]] {
-            let got = released(batches);
+            let got = released(0.6, batches);
             assert_eq!(got.len(), one_by_one.len(), "batches {batches:?}");
             for (a, b) in got.iter().zip(&one_by_one) {
                 assert_eq!(a, b, "batches {batches:?}");
             }
+        }
+    }
+
+    /// The kinds and times released between 0.9 s and 1.8 s.
+    fn around_the_gap(out: &[(char, f64, u16)]) -> Vec<(char, f64)> {
+        out.iter()
+            .filter(|e| (0.9..1.8).contains(&e.1) && e.0 != 't')
+            .map(|e| (e.0, (e.1 * 100.0).round() / 100.0))
+            .collect()
+    }
+
+    #[test]
+    fn frames_in_a_short_imu_gap_wait_for_it_and_a_long_gap_does_not_hold_them() {
+        // 0.2 s without IMU (shorter than the hold, 0.25 s + a frame): the frames at 1.05 and
+        // 1.15 s go right behind the first sample after the gap (1.2 s), as offline.
+        let short = around_the_gap(&released(0.2, &[1]));
+        let at = |x: &[(char, f64)], e: (char, f64)| x.iter().position(|&y| y == e).unwrap();
+        let first_after = at(&short, ('i', 1.2));
+        assert_eq!(at(&short, ('r', 1.05)), first_after + 1, "{short:?}");
+        assert_eq!(at(&short, ('r', 1.15)), first_after + 2, "{short:?}");
+        // 0.6 s without IMU: the frames go once it has been silent past the hold, before it
+        // comes back at 1.6 s.
+        let long = around_the_gap(&released(0.6, &[1]));
+        let back = at(&long, ('i', 1.6));
+        for f in [1.05, 1.15, 1.25, 1.35] {
+            assert!(at(&long, ('r', f)) < back, "frame {f}: {long:?}");
         }
     }
 }
