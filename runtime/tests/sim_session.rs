@@ -121,6 +121,15 @@ fn online_clock_converges_to_the_offline_fit() {
     }
 }
 
+/// ATE RMSE \[m\] of `t` against the session's ground truth.
+fn ate_rmse(s: &Session, t: &[TumPose]) -> f64 {
+    let gt = Trajectory::from_tum(&s.groundtruth().unwrap().unwrap());
+    evaluate(&gt, &Trajectory::from_tum(t), &Settings::default())
+        .unwrap()
+        .ate
+        .rmse
+}
+
 fn read_tum(p: &std::path::Path) -> Vec<TumPose> {
     std::fs::read_to_string(p)
         .unwrap()
@@ -270,13 +279,7 @@ fn offline_run_follows_milliego_odometry_across_imu_gaps_and_repeats_itself() {
         common.len(),
         theirs.len()
     );
-    let gt = Trajectory::from_tum(&s.groundtruth().unwrap().unwrap());
-    let ate = |t: &[TumPose]| {
-        evaluate(&gt, &Trajectory::from_tum(t), &Settings::default())
-            .unwrap()
-            .ate
-            .rmse
-    };
+    let ate = |t: &[TumPose]| ate_rmse(&s, t);
     let (a, b) = (ate(&ours), ate(&common));
     println!("ATE: runtime {a:.4} m, odometry {b:.4} m; poses at most {worst:.4} m apart");
     assert!(worst < 0.05, "poses {worst} m apart");
@@ -338,13 +341,7 @@ fn runtime_equals_odometry_with(
         common.push(*q);
     }
     assert_eq!(matched, ours.len());
-    let gt = Trajectory::from_tum(&s.groundtruth().unwrap().unwrap());
-    let ate = |t: &[TumPose]| {
-        evaluate(&gt, &Trajectory::from_tum(t), &Settings::default())
-            .unwrap()
-            .ate
-            .rmse
-    };
+    let ate = |t: &[TumPose]| ate_rmse(s, t);
     let (a, b, full) = (ate(&ours), ate(&common), ate(&theirs));
     println!(
         "ATE: runtime {a:.4} m, odometry on the same frames {b:.4} m, odometry with the levelling window {full:.4} m; {} frames in {:.3} s",
