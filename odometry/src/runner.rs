@@ -26,7 +26,10 @@
 //! offline order) or just after it (the runtime synchroniser's order). Either way its prior is
 //! the filter's prediction at the last sample before it, and its pose is the filter state at the
 //! first sample at or past it with its update applied: at once in the runtime order, at that
-//! sample in the offline order.
+//! sample in the offline order. Where several frames fall between two samples (an IMU gap), the filter's
+//! state after each sample is still the same in both orders (their updates count into the run of
+//! rejected frames at that sample in both); the poses given differ: offline each is the state
+//! with all those frames' updates, in the runtime order with those up to its own.
 
 use crate::ego_velocity::{
     Config as EgoConfig, Detection, EgoVelocityEstimator, Estimate, Prior, Status,
@@ -282,6 +285,11 @@ pub struct Runner {
     // Where the current rest began (the position held while it lasts).
     rest_anchor: Option<Vector3<f64>>,
     before: Option<Before>,
+    // The filter's counters before the first radar update applied behind the latest IMU sample
+    // (the runtime order), counted into the rejection run at the next sample: in the offline
+    // order those updates are applied, and counted, together at that sample, so a second frame
+    // in the same IMU interval is guided by the same run in both orders.
+    behind_counted: Option<RioCounters>,
     rejected_in_row: u32,
     last_imu_t: Option<f64>,
     // Radar-only dead reckoning while the IMU is missing.
@@ -336,6 +344,7 @@ impl Runner {
             rest: RestDetector::new(cfg.rest),
             rest_anchor: None,
             before: None,
+            behind_counted: None,
             rejected_in_row: 0,
             last_imu_t: None,
             dr: None,
@@ -670,6 +679,10 @@ impl Runner {
         if self.rio.is_none() {
             return;
         }
+        if let (Some(before), Some(rio)) = (self.behind_counted.take(), self.rio.as_ref()) {
+            let after = *rio.counters();
+            self.track(before, after);
+        }
         // Rest at the previous sample, decided now that every frame up to it is in (in either
         // input order), applied before propagating to this one.
         let due = self.rest.push_imu(&s);
@@ -812,10 +825,11 @@ impl Runner {
         }
         if let Some(rio) = self.rio.as_mut() {
             if let Some(m) = m {
+                // Applied now only behind the latest sample (else at the next one, where
+                // `filter_imu` counts it): counted at the next sample, as offline.
                 let before = *rio.counters();
                 rio.push_velocity(m);
-                let after = *rio.counters();
-                self.track(before, after);
+                self.behind_counted.get_or_insert(before);
             } else if !at_rest {
                 // No velocity from this frame: the vertical velocity bound still applies.
                 rio.push_frame_without_velocity(t);

@@ -218,8 +218,10 @@ fn offline_run_follows_milliego_odometry_across_imu_gaps_and_repeats_itself() {
     // IMU missing in the longer ones, yet holds each radar frame in a gap until the first sample
     // after it (the offline order), so the filter integrates the IMU over the gap, as offline,
     // instead of dead-reckoning the frame from its Doppler alone. Pose for pose it is not exact
-    // across these gaps (up to 3 cm here; without gaps it is: the tests above). And it repeats
-    // itself: the same poses, byte for byte, whatever the threads' timing.
+    // across these gaps (up to 3.3 cm here; without gaps it is: the tests above): where several
+    // frames fall between two samples, offline each one's pose has all their updates, in the
+    // runtime those up to its own (the filter's state is the same: `odometry/tests/runner.rs`).
+    // And it repeats itself: the same poses, byte for byte, whatever the threads' timing.
     let mut sc = Scenario::new(Family::Office, MotionKind::Handheld, 13);
     sc.duration_s = 8.0;
     sc.imu_gap_share = 0.3;
