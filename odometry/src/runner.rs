@@ -26,10 +26,10 @@
 //! offline order) or just after it (the runtime synchroniser's order). Either way its prior is
 //! the filter's prediction at the last sample before it, and its pose is the filter state at the
 //! first sample at or past it with its update applied: at once in the runtime order, at that
-//! sample in the offline order. Where several frames fall between two samples (an IMU gap), the filter's
-//! state after each sample is still the same in both orders (their updates count into the run of
-//! rejected frames at that sample in both); the poses given differ: offline each is the state
-//! with all those frames' updates, in the runtime order with those up to its own.
+//! sample in the offline order. Where several frames fall between two samples (an IMU gap), the
+//! filter's state after each sample is still the same in both orders (their updates count into
+//! the run of rejected frames at that sample in both); the poses given differ: offline each is
+//! the state with all those frames' updates, in the runtime order with those up to its own.
 
 use crate::ego_velocity::{
     Config as EgoConfig, Detection, EgoVelocityEstimator, Estimate, Prior, Status,

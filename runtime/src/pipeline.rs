@@ -660,8 +660,9 @@ fn spawn_sync(
         sync.offline_clock = offline && !session_online_clock;
         sync.data_time = offline;
         let mut hist = Histogram::default();
-        // Offline: the feeder's order, rebuilt item by item (see `FeedOrder`).
-        let mut feed = FeedOrder::new(sh2.imu_q.capacity(), sh2.radar_q.capacity());
+        // Offline: the feeder's order, rebuilt item by item (see `FeedOrder`; live, unused).
+        let held = |capacity: usize| if offline { capacity } else { 0 };
+        let mut feed = FeedOrder::new(held(sh2.imu_q.capacity()), held(sh2.radar_q.capacity()));
         loop {
             let done = sh2.inputs_done.load(Ordering::Acquire);
             let watermark = f64::from_bits(sh2.watermark.load(Ordering::Acquire));

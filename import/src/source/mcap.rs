@@ -618,9 +618,10 @@ impl<R: Read + Seek> Walk<R> {
 
     /// `buf.len()` bytes at `pos`; `false` where the file ends first.
     fn read_at(&mut self, pos: u64, buf: &mut [u8]) -> std::io::Result<bool> {
-        match i64::try_from(pos.wrapping_sub(self.at)) {
-            Ok(d) if pos >= self.at => self.r.seek_relative(d)?,
-            _ => {
+        // Forward within the buffer where it can; anywhere else, a seek.
+        match pos.checked_sub(self.at).and_then(|d| i64::try_from(d).ok()) {
+            Some(d) => self.r.seek_relative(d)?,
+            None => {
                 self.r.seek(SeekFrom::Start(pos))?;
             }
         }

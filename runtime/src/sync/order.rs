@@ -534,9 +534,7 @@ impl Synchroniser {
 /// at or after its time) through two queues, so the thread on the other side sees them in
 /// batches whose sizes depend on how the two threads interleave. Polled once per batch, at the
 /// feeder's watermark, the synchroniser would judge stalls (a gap in the IMU) at whatever time
-/// the batch happened to end: in a gap it would release the radar frames at once (no IMU),
-/// after the gap it would release them behind the first sample past them, and the estimators
-/// would see a different order from run to run. Here each item goes in at its feed time
+/// the batch happened to end, and its releases (and flags) would differ from run to run. Here each item goes in at its feed time
 /// ([`ImuItem::fed_s`], [`RadarItem::fed_s`]), and the synchroniser is polled at that time: what
 /// it releases depends on the session alone, as if it ran in the feeder's thread.
 #[derive(Debug)]
@@ -572,16 +570,15 @@ impl FeedOrder {
     /// Hands `sync` every held item fed at or before `upto` \[s\] (the feeder's watermark read
     /// before the queues were drained: everything fed up to it has been taken), in feed order (a
     /// radar frame before an IMU sample of the same time), polling it at each item's feed time.
-    /// Items without a feed time (or a NaN one) go first. Returns whether anything went.
+    /// Items without a feed time (or a NaN one) go first.
     pub fn release(
         &mut self,
         upto: f64,
         sync: &mut Synchroniser,
         mut recycle: impl FnMut(Box<RadarItem>),
         mut emit: impl FnMut(SyncOut),
-    ) -> bool {
+    ) {
         let fed = |t: Option<f64>| t.filter(|t| !t.is_nan()).unwrap_or(f64::NEG_INFINITY);
-        let mut any = false;
         loop {
             let ti = self.imu.front().map(|s| fed(s.fed_s));
             let tr = self.radar.front().map(|r| fed(r.fed_s));
@@ -592,7 +589,7 @@ impl FeedOrder {
             };
             let t = if radar_next { tr } else { ti };
             let Some(t) = t.filter(|&t| t <= upto) else {
-                return any;
+                return;
             };
             if radar_next {
                 if let Some(r) = self.radar.pop_front() {
@@ -601,7 +598,6 @@ impl FeedOrder {
             } else if let Some(s) = self.imu.pop_front() {
                 sync.push_imu(s);
             }
-            any = true;
             if t.is_finite() {
                 sync.poll(t, &mut emit);
             }
