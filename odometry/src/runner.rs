@@ -432,6 +432,7 @@ impl Runner {
             // The IMU is back after a gap the radar bridged: re-anchor a fresh filter at the
             // dead-reckoned state (tilt and biases re-learned, the pose kept).
             let st = NavState { t: s.t, ..d };
+            self.count_behind();
             self.rio = Some(self.filter_from(Rio::new(self.cfg.rio, self.mount, st)));
             self.counters.imu_restarts += 1;
             self.clear_stack();
@@ -675,14 +676,20 @@ impl Runner {
         }
     }
 
-    fn filter_imu(&mut self, s: ImuSample) {
-        if self.rio.is_none() {
-            return;
-        }
+    /// Counts the updates applied behind the latest sample into the rejection run
+    /// ([`Runner::track`]), against the filter that applied them.
+    fn count_behind(&mut self) {
         if let (Some(before), Some(rio)) = (self.behind_counted.take(), self.rio.as_ref()) {
             let after = *rio.counters();
             self.track(before, after);
         }
+    }
+
+    fn filter_imu(&mut self, s: ImuSample) {
+        if self.rio.is_none() {
+            return;
+        }
+        self.count_behind();
         // Rest at the previous sample, decided now that every frame up to it is in (in either
         // input order), applied before propagating to this one.
         let due = self.rest.push_imu(&s);
