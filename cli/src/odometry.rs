@@ -31,8 +31,9 @@ pub struct OdometryArgs {
     /// Doppler noise of a static point besides quantisation, in m/s (default 0.05; the quantisation step is the .cfg's velocity resolution).
     #[arg(long)]
     doppler_sigma: Option<f32>,
-    /// Doppler quantisation step in m/s (0: continuous). Default: the .cfg's velocity resolution
-    /// when the session has a .cfg, else continuous.
+    /// Doppler quantisation step in m/s (0: continuous). Default: the step the points' radial
+    /// velocities show once they show one (reported as `doppler_step`), until then the .cfg's
+    /// velocity resolution when the session has a .cfg, else continuous.
     #[arg(long)]
     doppler_step: Option<f32>,
     /// Near field in m: points closer than this with zero Doppler are skipped as leakage
@@ -99,6 +100,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
     }
     if let Some(s) = a.doppler_step {
         cfg.ego.doppler_step = s;
+        cfg.ego.step_from_data = false;
         cfg.doppler_step_from_cfg = false;
     }
     cfg.rio.radar_heading = a.radar_heading;
@@ -127,6 +129,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
             "ego_velocity": {"ok": r.ego_ok, "degenerate": r.ego_degenerate, "too_few_points": r.ego_too_few, "no_consensus": r.ego_no_consensus, "stacked": r.ego_stacked},
             "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "vertical_bounds": r.vertical_bounds, "nis_mean": r.nis_mean},
             "barometer": if r.pressure_readings == 0 { json!("none in the session: height from radar and IMU only") } else if a.no_barometer { json!(format!("{} readings ignored (--no-barometer)", r.pressure_readings)) } else { json!({"readings": r.pressure_readings, "updates": r.baro_updates, "rejected": r.baro_rejected}) },
+            "doppler_step": doppler_step_json(r.doppler_step, a.doppler_step.is_some()),
             "near_field_points": r.near_field_points,
             "ground_vehicle": if a.vehicle { json!({"applied": r.nonholonomic.0, "gated": r.nonholonomic.1}) } else { json!("not asked (--vehicle)") },
             "radar_stream": {"frames_bad": r.radar.bad, "bytes_skipped": r.radar.bytes_skipped},
@@ -139,4 +142,14 @@ pub fn run(a: OdometryArgs) -> Result<()> {
         })
     );
     Ok(())
+}
+
+/// The Doppler step's report: configured, seen in the data, and the one used [m/s].
+fn doppler_step_json((configured, seen): (f32, Option<f32>), stated: bool) -> serde_json::Value {
+    json!({
+        "configured_mps": configured,
+        "from": if stated { "--doppler-step" } else { "the .cfg's velocity resolution" },
+        "seen_in_data_mps": seen,
+        "used_mps": seen.unwrap_or(configured),
+    })
 }

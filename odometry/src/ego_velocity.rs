@@ -45,6 +45,10 @@ pub struct Config {
     /// `bin x resolution`; 0: continuous). A static point's radial velocity is then off by up to
     /// half a step: see [`Config::inlier_threshold`] and [`Config::doppler_std`].
     pub doppler_step: f32,
+    /// Take the step from the points' own radial velocities when they lie on a lattice of one
+    /// ([`crate::lattice`]), in place of `doppler_step`, once the stream shows it (the runner
+    /// does this; default on). Off when the caller states the step.
+    pub step_from_data: bool,
     /// Direction error of a point \[rad\] (angular resolution, cell merging): a point's radial
     /// velocity is then off by about `|v| direction_sigma`, which adds to `sigma` in the
     /// covariance of the estimate (not in the inlier gate, which would let ghosts in).
@@ -113,6 +117,7 @@ impl Default for Config {
             min_range: 0.1,
             near_field_m: 0.0,
             doppler_step: 0.0,
+            step_from_data: true,
             seed: 0x5EED,
             direction_sigma: 0.3,
         }
@@ -237,6 +242,11 @@ impl EgoVelocityEstimator {
     /// The settings.
     pub fn config(&self) -> &Config {
         &self.cfg
+    }
+
+    /// Sets the Doppler quantisation step \[m/s\] ([`Config::doppler_step`]).
+    pub fn set_doppler_step(&mut self, step: f32) {
+        self.cfg.doppler_step = step;
     }
 
     /// Estimates the sensor velocity from one frame.

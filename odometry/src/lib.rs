@@ -4,6 +4,7 @@
 //! * [`ego_velocity`]: the sensor's velocity from one radar frame's (direction, radial velocity)
 //!   pairs, with RANSAC against moving objects and multipath, a least-squares refinement, a
 //!   covariance, and degenerate geometry reported rather than silently wrong.
+//! * [`lattice`]: the Doppler quantisation step read from the radial velocities themselves.
 //! * [`rio`]: the error-state Kalman filter that fuses both (IMU propagation, radar velocity
 //!   updates, bias estimation, chi-square gating).
 //! * [`learned`]: the learned model's relative motion as a filter measurement, and the online
@@ -19,6 +20,7 @@
 #![warn(missing_docs)]
 
 pub mod ego_velocity;
+pub mod lattice;
 pub mod learned;
 pub mod offline;
 pub mod rest;

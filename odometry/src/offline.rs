@@ -183,6 +183,10 @@ pub struct OfflineResult {
     pub time_offset: Option<(f64, f64, String)>,
     /// What became of the learned motions given to [`run_with_motions`] (zero otherwise).
     pub learned: crate::learned::LearnedCounters,
+    /// The Doppler quantisation step \[m/s\]: the configured one (the `.cfg`'s, or the
+    /// caller's) and the one the radial velocities showed, which replaced it
+    /// ([`crate::runner::Runner::doppler_step`]).
+    pub doppler_step: (f32, Option<f32>),
 }
 
 /// Why a run could not start.
@@ -368,5 +372,6 @@ pub fn run_with_motions(
             .zip(offset_why)
             .map(|((o, sd), why)| (o, sd, why)),
         learned: *runner.learned_counters(),
+        doppler_step: runner.doppler_step(),
     })
 }

@@ -34,6 +34,7 @@
 use crate::ego_velocity::{
     Config as EgoConfig, Detection, EgoVelocityEstimator, Estimate, Prior, Status,
 };
+use crate::lattice::DopplerLattice;
 use crate::learned::{
     LearnedConfig, LearnedCounters, Monitor, Outcome, RelativeMotion, ScaleCalibration,
     SCALE_COVERS,
@@ -281,6 +282,10 @@ pub struct Runner {
     ego_stacked: EgoVelocityEstimator,
     est: Estimate,
     dets: Vec<Detection>,
+    // The Doppler step the frames' radial velocities show ([`EgoConfig::step_from_data`]).
+    lattice: DopplerLattice,
+    // The step from the configuration, before the data's replaced it.
+    configured_step: f32,
     rest: RestDetector,
     // Where the current rest began (the position held while it lasts).
     rest_anchor: Option<Vector3<f64>>,
@@ -341,6 +346,8 @@ impl Runner {
             }),
             est: Estimate::with_capacity(1024),
             dets: Vec::with_capacity(1024),
+            lattice: DopplerLattice::new(),
+            configured_step: cfg.ego.doppler_step,
             rest: RestDetector::new(cfg.rest),
             rest_anchor: None,
             before: None,
@@ -729,6 +736,30 @@ impl Runner {
         self.track(before, after);
     }
 
+    /// The Doppler quantisation step \[m/s\]: the configured one, and the one the frames' radial
+    /// velocities show ([`crate::lattice`]; None until they show one, or when
+    /// [`EgoConfig::step_from_data`] is off). The second, when there is one, is the step in use.
+    pub fn doppler_step(&self) -> (f32, Option<f32>) {
+        let seen = self.cfg.ego.step_from_data.then(|| self.lattice.step());
+        (self.configured_step, seen.flatten().map(|q| q as f32))
+    }
+
+    /// Takes the Doppler step the stream shows, once it shows one, for the ego-velocity's gate
+    /// and noise floor and the rest verdict's zero.
+    fn learn_doppler_step(&mut self, dets: &[Detection]) {
+        if !self.cfg.ego.step_from_data {
+            return;
+        }
+        if let Some(q) = self.lattice.observe(dets) {
+            let q = q as f32;
+            if q != self.cfg.ego.doppler_step {
+                self.cfg.ego.doppler_step = q;
+                self.ego.set_doppler_step(q);
+                self.ego_stacked.set_doppler_step(q);
+            }
+        }
+    }
+
     /// The ego-velocity of `dets` guided by `prior` (status counted).
     fn measure(
         &mut self,
@@ -736,6 +767,7 @@ impl Runner {
         dets: &[Detection],
         prior: Option<Prior>,
     ) -> Option<VelocityMeasurement> {
+        self.learn_doppler_step(dets);
         self.ego.estimate_guided_into(dets, prior, &mut self.est);
         match self.est.status {
             Status::Ok => {

@@ -460,6 +460,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         clocks,
         stage: stage_counters,
         radar_time_offset: stage_ends.radar_time_offset,
+        doppler_step: stage_ends.doppler_step,
         learned: stage_ends.learned,
         out: &out,
         radar_report: session_radar_report.as_ref(),
@@ -807,6 +808,7 @@ fn spawn_stage(
         sh2.stage_done.store(true, Ordering::Release);
         let ends = StageEnds {
             radar_time_offset: stage.radar_time_offset(),
+            doppler_step: stage.doppler_step(),
             learned: stage.learned(),
         };
         (hist, stage.counters, ends, handoff)
@@ -943,6 +945,7 @@ fn view_status(sh: &Shared, c: &InputCounters, v: &ViewTap) -> ViewStatus {
 /// What the estimator stage knows at the end of a run beyond its counters.
 struct StageEnds {
     radar_time_offset: Option<(f64, f64)>,
+    doppler_step: Option<(f32, Option<f32>)>,
     learned: Option<crate::summary::LearnedSummary>,
 }
 
@@ -955,6 +958,7 @@ struct RunEnds<'a> {
     clocks: Clocks,
     stage: StageCounters,
     radar_time_offset: Option<(f64, f64)>,
+    doppler_step: Option<(f32, Option<f32>)>,
     learned: Option<crate::summary::LearnedSummary>,
     out: &'a OutputEnd,
     radar_report: Option<&'a StreamReport>,
@@ -1008,6 +1012,15 @@ fn run_summary(e: &RunEnds<'_>, sh: &Shared, c: &InputCounters, latency: &Latenc
                 sd * 1e3
             ),
             None => "not estimated: the radar stamps are trusted".into(),
+        },
+        doppler_step: match e.doppler_step {
+            None => "not used by this estimator".into(),
+            Some((configured, Some(seen))) => format!(
+                "{seen:.4} m/s, read from the points' radial velocities (configured {configured:.4} m/s)"
+            ),
+            Some((configured, None)) => format!(
+                "{configured:.4} m/s, configured (the points showed no step of their own)"
+            ),
         },
         frames_out: FramesOut {
             poses_sent: u64::from(e.out.sent),

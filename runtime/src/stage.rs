@@ -112,6 +112,14 @@ impl Stage {
         })
     }
 
+    /// The Doppler step \[m/s\], configured and seen in the points, the primary's first.
+    pub fn doppler_step(&self) -> Option<(f32, Option<f32>)> {
+        self.built
+            .primary
+            .doppler_step()
+            .or_else(|| self.built.fallback.as_ref().and_then(|f| f.doppler_step()))
+    }
+
     /// What became of the learned measurements (the fused estimator only).
     pub fn learned(&self) -> Option<crate::summary::LearnedSummary> {
         let mut l = self.built.primary.learned()?;

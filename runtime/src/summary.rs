@@ -23,6 +23,10 @@ pub struct RunSummary {
     /// trigger), or that the stamps were trusted.
     #[serde(default)]
     pub radar_time_offset: String,
+    /// The Doppler quantisation step the ego-velocity's gate assumed: read from the points'
+    /// radial velocities when they show one, else the `.cfg`'s velocity resolution.
+    #[serde(default)]
+    pub doppler_step: String,
     /// What the estimator stage and the outputs produced.
     pub frames_out: FramesOut,
     /// Items dropped by every queue and buffer.

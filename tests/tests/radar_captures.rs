@@ -174,3 +174,73 @@ fn xwr16xx_sdk30_truncated_frames_are_all_reported() {
         .all(|d| matches!(d, FrameError::Truncated { claimed: 288, .. })));
     assert_eq!(r.bytes_skipped, 792_064);
 }
+
+/// Each frame's points' radial velocities \[m/s\], decoded at once.
+fn radial_velocities(name: &str) -> Option<Vec<Vec<f32>>> {
+    let dir = captures_dir("ti-mmwave")?;
+    let data = std::fs::read(dir.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let mut framer: Box<Framer<DEFAULT_MAX_FRAME>> = Box::default();
+    let mut input = &data[..];
+    let mut frames = Vec::new();
+    loop {
+        match framer.poll(&mut input) {
+            Poll::Frame(f) => frames.push(
+                PointCloud::from_frame(&f, None)
+                    .points
+                    .iter()
+                    .map(|p| p.velocity)
+                    .collect(),
+            ),
+            Poll::Dropped { .. } => {}
+            Poll::NeedMore => break,
+        }
+    }
+    Some(frames)
+}
+
+#[test]
+fn the_doppler_step_of_real_captures_is_read_from_their_points() {
+    use milliego_odometry::ego_velocity::Detection;
+    use milliego_odometry::lattice::{DopplerLattice, LATTICE_TOLERANCE};
+    // The OOB demo reports bin x resolution; the people-counting lab's compressed points are
+    // multiples of their own unit, close to (not exactly) multiples of a step.
+    for name in [
+        "xwr68xx_sdk3.3_automated_doors.dat",
+        "xwr68xx_sdk3.5_people_counting_3d.bin",
+    ] {
+        let Some(frames) = radial_velocities(name) else {
+            return;
+        };
+        let mut lattice = DopplerLattice::new();
+        for f in &frames {
+            let dets: Vec<Detection> = f
+                .iter()
+                .map(|&v| Detection {
+                    position: [0.0, 1.0, 0.0],
+                    radial_velocity: v,
+                })
+                .collect();
+            lattice.observe(&dets);
+        }
+        let step = lattice.step().unwrap_or_else(|| panic!("{name}: no step"));
+        let all: Vec<f64> = frames
+            .iter()
+            .flatten()
+            .map(|v| f64::from(v.abs()))
+            .filter(|&v| v > 1e-4)
+            .collect();
+        let smallest = all.iter().copied().fold(f64::INFINITY, f64::min);
+        let on = all
+            .iter()
+            .filter(|&&v| ((v / step) - (v / step).round()).abs() <= LATTICE_TOLERANCE)
+            .count();
+        println!(
+            "{name}: step {step:.5} m/s, smallest |v| {smallest:.5} m/s, {on} of {} non-zero values on it",
+            all.len()
+        );
+        // The first bin is in both captures: the step is the smallest value, and (nearly)
+        // every value of the whole capture is on it, not only the last ones it looked at.
+        assert!((step - smallest).abs() < 0.005 * smallest, "{name}");
+        assert!(on * 100 >= all.len() * 99, "{name}");
+    }
+}

@@ -60,6 +60,10 @@ impl Estimator for Classical {
         self.runner.filter().and_then(|f| f.time_offset())
     }
 
+    fn doppler_step(&self) -> Option<(f32, Option<f32>)> {
+        self.runner.uses_radar().then(|| self.runner.doppler_step())
+    }
+
     fn name(&self) -> &'static str {
         if self.runner.uses_radar() {
             "doppler"

@@ -106,6 +106,10 @@ impl Estimator for Fused {
         self.classical.radar_time_offset()
     }
 
+    fn doppler_step(&self) -> Option<(f32, Option<f32>)> {
+        self.classical.doppler_step()
+    }
+
     fn learned(&self) -> Option<LearnedSummary> {
         let r = self.classical.runner();
         let c = r.learned_counters();

@@ -113,6 +113,12 @@ pub trait Estimator: Send {
     fn radar_time_offset(&self) -> Option<(f64, f64)> {
         None
     }
+    /// The Doppler quantisation step \[m/s\] the estimator configured and the one the points
+    /// showed ([`milliego_odometry::runner::Runner::doppler_step`]), when it uses the radar's
+    /// Doppler.
+    fn doppler_step(&self) -> Option<(f32, Option<f32>)> {
+        None
+    }
     /// What became of the learned model's measurements (the fused estimator only).
     fn learned(&self) -> Option<crate::summary::LearnedSummary> {
         None
