@@ -86,7 +86,7 @@ impl DopplerLattice {
 }
 
 /// The largest step whose multiples hold [`LATTICE_SHARE`] of the magnitudes of `values` (at most
-/// [`LATTICE_VALUES`] are looked at). Candidates: each of the [`CANDIDATES`] smallest distinct
+/// [`LATTICE_VALUES`] are looked at). Candidates: each of the 4 smallest distinct
 /// magnitudes divided by 1, 2 or 3 (one stray small value does not hide the step; a stream whose
 /// smallest value is two or three steps still shows it), each refined by least squares over the
 /// values on its lattice.
