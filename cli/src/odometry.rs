@@ -128,7 +128,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
             "poses": r.trajectory.len(), "radar_frames": r.radar_frames, "imu_samples": r.imu_samples,
             "ego_velocity": {"ok": r.ego_ok, "degenerate": r.ego_degenerate, "too_few_points": r.ego_too_few, "no_consensus": r.ego_no_consensus, "stacked": r.ego_stacked},
             "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "vertical_bounds": r.vertical_bounds, "nis_mean": r.nis_mean},
-            "barometer": if r.pressure_readings == 0 { json!("none in the session: height from radar and IMU only") } else if a.no_barometer { json!(format!("{} readings ignored (--no-barometer)", r.pressure_readings)) } else { json!({"readings": r.pressure_readings, "updates": r.baro_updates, "rejected": r.baro_rejected}) },
+            "barometer": if r.pressure_readings == 0 { json!("none in the session: height from radar and IMU only") } else if a.no_barometer { json!(format!("{} readings ignored (--no-barometer)", r.pressure_readings)) } else { json!({"readings": r.pressure_readings, "updates": r.baro_updates, "rejected": r.baro_rejected, "reanchors": r.baro_reanchors}) },
             "doppler_step": doppler_step_json(r.doppler_step, a.doppler_step.is_some()),
             "near_field_points": r.near_field_points,
             "ground_vehicle": if a.vehicle { json!({"applied": r.nonholonomic.0, "gated": r.nonholonomic.1}) } else { json!("not asked (--vehicle)") },

@@ -162,6 +162,9 @@ pub struct OfflineResult {
     pub baro_updates: u64,
     /// Barometric heights rejected (gate, or not finite).
     pub baro_rejected: u64,
+    /// Times the filter re-anchored its height to the barometer after a run of rejections
+    /// ([`crate::rio::RioCounters::baro_reanchors`]).
+    pub baro_reanchors: u64,
     /// Ground vehicle constraints applied and rejected by their gate
     /// ([`RioConfig::nonholonomic_std`]).
     pub nonholonomic: (u64, u64),
@@ -360,6 +363,7 @@ pub fn run_with_motions(
         pressure_readings: baro.len(),
         baro_updates: filter.baro_updates,
         baro_rejected: filter.baro_rejected,
+        baro_reanchors: filter.baro_reanchors,
         nonholonomic: (filter.nonholonomic_updates, filter.nonholonomic_gated),
         near_field_points: c.near_field_points,
         imu_samples: imu.len(),

@@ -93,6 +93,14 @@ pub struct RioConfig {
     pub time_offset_std: f64,
     /// Random walk of the estimated time offset \[s/sqrt(s)\] (clock drift between the fits).
     pub time_offset_walk: f64,
+    /// Motion the IMU missed in a gap \[m/s^2\]: across missing samples the integration
+    /// draws the specific force as a straight line between the samples either side; the true
+    /// one departs from it by about this much, so the velocity variance grows by
+    /// `(gap_accel_std x missing time)^2` (the white-noise density alone would keep the filter
+    /// as sure of its velocity after a 0.2 s gap as after one sample). 0: off. (The same for
+    /// the attitude, with the rate of turn, was tried and left out: it let radar updates turn
+    /// the attitude on a sparse outdoor walk, docs/odometry.md.)
+    pub gap_accel_std: f64,
     /// Ground vehicle constraint \[m/s\]: at each radar frame the vehicle frame's lateral and
     /// vertical velocity are 0 with this deviation (a car does not slide sideways or lift off;
     /// [`Rio::set_vehicle_frame`] places that frame); `f64::INFINITY`: not a ground vehicle.
@@ -122,6 +130,7 @@ impl Default for RioConfig {
             time_offset_std: 0.0,
             time_offset_walk: 1e-4,
             nonholonomic_std: f64::INFINITY,
+            gap_accel_std: 1.0,
         }
     }
 }
@@ -182,6 +191,10 @@ pub struct RioCounters {
     pub baro_updates: u64,
     /// Barometric heights rejected (not finite, or outside a 99.9% gate).
     pub baro_rejected: u64,
+    /// Times the filter re-anchored its height to the barometer after rejecting every reading
+    /// for [`BARO_REANCHOR_S`] (its height had run away and its own variance no longer admitted
+    /// the barometer).
+    pub baro_reanchors: u64,
     /// Ground vehicle constraints applied ([`RioConfig::nonholonomic_std`]).
     pub nonholonomic_updates: u64,
     /// Ground vehicle constraints rejected by their gate (a skid, a jump).
@@ -190,6 +203,13 @@ pub struct RioCounters {
 
 /// Chi-square gate for one degree of freedom (99.9%).
 const GATE_1DOF: f64 = 10.83;
+/// How long the barometer must be rejected without a break before the filter's height, not the
+/// barometer, is doubted \[s\]: the height and vertical velocity are re-anchored
+/// ([`RioCounters::baro_reanchors`]). At 50 Hz that is 50 readings in a row outside a 99.9%
+/// gate, which a barometer within its noise gives about never.
+pub const BARO_REANCHOR_S: f64 = 1.0;
+/// Fewest rejected readings in such a run (a slow barometer's run is not decided by two).
+const BARO_REANCHOR_MIN: u32 = 5;
 /// Chi-square gate for two degrees of freedom (99.9%).
 const GATE_2DOF: f64 = 13.82;
 
@@ -295,6 +315,11 @@ pub struct Rio {
     nis_sum: f64,
     /// Barometer bias \[m\] (barometric height minus the filter's), once a reading came.
     baro_bias: Option<f64>,
+    /// The IMU's sample interval \[s\] (the shortest recent one; gaps do not move it).
+    nominal_dt: f64,
+    /// The current run of rejected barometer readings: its first reading's time \[s\] and
+    /// length.
+    baro_rejected_run: Option<(f64, u32)>,
     /// Radar-to-IMU time offset \[s\]: a radar measurement stamped `t` was taken at `t + t_d`.
     time_offset: f64,
     /// Recent steps' changes of the radar prediction (only while the offset is estimated).
@@ -338,6 +363,8 @@ impl Rio {
             gated_run: 0,
             nis_sum: 0.0,
             baro_bias: None,
+            baro_rejected_run: None,
+            nominal_dt: 0.0,
             time_offset: 0.0,
             history: StepHistory::new(),
             vehicle: RadarMount::default(),
@@ -565,8 +592,28 @@ impl Rio {
         let s = h.dot(&(self.p * h)) + r;
         if y * y / s > GATE_1DOF {
             self.counters.baro_rejected += 1;
-            return;
+            let t = self.nav.state().t;
+            let (since, n) = self.baro_rejected_run.get_or_insert((t, 0));
+            *n += 1;
+            if t - *since < BARO_REANCHOR_S || *n < BARO_REANCHOR_MIN {
+                return;
+            }
+            // Every reading for a second disagreed: the filter's height ran away (a vertical
+            // velocity error it was too sure of) and its variance shuts the barometer out for
+            // good. Forget the height and vertical velocity, then take this reading.
+            self.counters.baro_reanchors += 1;
+            for (k, var) in [
+                (2, y * y + r),
+                (5, self.cfg.init_velocity_std * self.cfg.init_velocity_std),
+            ] {
+                for j in 0..N {
+                    self.p[(k, j)] = 0.0;
+                    self.p[(j, k)] = 0.0;
+                }
+                self.p[(k, k)] = var;
+            }
         }
+        self.baro_rejected_run = None;
         self.scalar_update(&h, y, r);
         self.counters.baro_updates += 1;
     }
@@ -585,7 +632,7 @@ impl Rio {
             .copy_from(&(i3 - w.cross_matrix() * dt));
         fm.fixed_view_mut::<3, 3>(6, 12).copy_from(&(-i3 * dt));
         let mut q = Mn::zeros();
-        let c = &self.cfg;
+        let c = self.cfg;
         for (at, density) in [
             (3, c.accel_noise),
             (6, c.gyro_noise),
@@ -598,6 +645,18 @@ impl Rio {
         }
         if self.baro_bias.is_some() {
             q[(BARO, BARO)] = c.baro_bias_walk * c.baro_bias_walk * dt;
+        }
+        // Samples missing before this one: what the straight line between the two samples
+        // either side could not see.
+        if self.nominal_dt <= 0.0 || dt < self.nominal_dt {
+            self.nominal_dt = dt;
+        } else if dt < 1.5 * self.nominal_dt {
+            self.nominal_dt += 0.05 * (dt - self.nominal_dt);
+        } else {
+            let missing = dt - self.nominal_dt;
+            for k in 3..6 {
+                q[(k, k)] += (c.gap_accel_std * missing).powi(2);
+            }
         }
         if self.estimates_time_offset() {
             q[(TD, TD)] = c.time_offset_walk * c.time_offset_walk * dt;

@@ -186,3 +186,58 @@ fn levelling_recovers_roll_and_pitch() {
         "{r} {p} {y}"
     );
 }
+
+/// A filter standing still, levelled, fed 100 Hz samples and 50 Hz barometric heights from
+/// `height(t)` up to `until` \[s\].
+fn standing_with_barometer(height: impl Fn(f64) -> f64, until: f64) -> Rio {
+    let g = [0.0, 0.0, STANDARD_GRAVITY];
+    let mut rio = Rio::levelled(RioConfig::default(), RadarMount::default(), 0.0, g);
+    let mut k = 0u32;
+    loop {
+        let t = f64::from(k) * 0.01;
+        if t > until {
+            return rio;
+        }
+        if k.is_multiple_of(2) {
+            rio.push_height(t, height(t));
+        }
+        rio.push_imu(ImuSample {
+            t,
+            accel: g,
+            gyro: [0.0; 3],
+        });
+        k += 1;
+    }
+}
+
+#[test]
+fn a_barometer_rejected_for_a_second_re_anchors_the_height() {
+    // The barometric height steps 3 m at 10 s (as it does when the filter's own height has run
+    // 3 m away): every reading then fails the gate of a filter sure of its height. After a
+    // second of rejections the filter takes the barometer's height again.
+    let step = |t: f64| if t < 10.0 { 0.0 } else { 3.0 };
+    let rio = standing_with_barometer(step, 10.9);
+    let c = *rio.counters();
+    assert_eq!(c.baro_reanchors, 0);
+    assert!(c.baro_rejected >= 40, "{c:?}");
+    assert!(rio.state().p.z.abs() < 0.1, "{}", rio.state().p.z);
+    let rio = standing_with_barometer(step, 12.0);
+    let c = *rio.counters();
+    assert_eq!(c.baro_reanchors, 1, "{c:?}");
+    assert!(c.baro_rejected < 60, "{c:?}");
+    assert!((rio.state().p.z - 3.0).abs() < 0.3, "{}", rio.state().p.z);
+    // A reading off once in a while never re-anchors.
+    let rio = standing_with_barometer(
+        |t| {
+            if ((t * 50.0).round() as u32).is_multiple_of(25) {
+                3.0
+            } else {
+                0.0
+            }
+        },
+        30.0,
+    );
+    let c = *rio.counters();
+    assert_eq!(c.baro_reanchors, 0, "{c:?}");
+    assert!(c.baro_rejected > 0 && rio.state().p.z.abs() < 0.1, "{c:?}");
+}
