@@ -148,7 +148,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
 fn doppler_step_json((configured, seen): (f32, Option<f32>), stated: bool) -> serde_json::Value {
     json!({
         "configured_mps": configured,
-        "from": if stated { "--doppler-step" } else { "the .cfg's velocity resolution" },
+        "from": if stated { "--doppler-step" } else if configured > 0.0 { "the .cfg's velocity resolution" } else { "none (no .cfg): continuous" },
         "seen_in_data_mps": seen,
         "used_mps": seen.unwrap_or(configured),
     })

@@ -602,20 +602,22 @@ impl Rio {
             // velocity error it was too sure of) and its variance shuts the barometer out for
             // good. Forget the height and vertical velocity, then take this reading.
             self.counters.baro_reanchors += 1;
-            for (k, var) in [
-                (2, y * y + r),
-                (5, self.cfg.init_velocity_std * self.cfg.init_velocity_std),
-            ] {
-                for j in 0..N {
-                    self.p[(k, j)] = 0.0;
-                    self.p[(j, k)] = 0.0;
-                }
-                self.p[(k, k)] = var;
-            }
+            self.forget(2, y * y + r);
+            self.forget(5, self.cfg.init_velocity_std * self.cfg.init_velocity_std);
         }
         self.baro_rejected_run = None;
         self.scalar_update(&h, y, r);
         self.counters.baro_updates += 1;
+    }
+
+    /// Forgets what error-state component `k` was believed to be: its correlations go and its
+    /// variance becomes `var` (a re-anchoring).
+    fn forget(&mut self, k: usize, var: f64) {
+        for j in 0..N {
+            self.p[(k, j)] = 0.0;
+            self.p[(j, k)] = 0.0;
+        }
+        self.p[(k, k)] = var;
     }
 
     fn propagate_cov(&mut self, before: &NavState, s: &ImuSample, dt: f64) {
@@ -812,11 +814,7 @@ impl Rio {
             let sv = self.cfg.init_velocity_std * self.cfg.init_velocity_std;
             let st = self.cfg.init_tilt_std * self.cfg.init_tilt_std;
             for k in 3..8 {
-                for r in 0..N {
-                    self.p[(r, k)] = 0.0;
-                    self.p[(k, r)] = 0.0;
-                }
-                self.p[(k, k)] = if k < 6 { sv } else { st };
+                self.forget(k, if k < 6 { sv } else { st });
             }
             // Taken without the gate: after a run of rejections the filter, not the radar, is
             // the one to doubt.

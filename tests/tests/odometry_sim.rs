@@ -177,6 +177,15 @@ fn a_cruising_robot_is_never_taken_for_at_rest() {
     assert_eq!(on.trajectory, off.trajectory, "no rest, no change");
 }
 
+/// Largest height difference from the first pose \[m\].
+fn height_wander(poses: &[milliego_session::TumPose]) -> f64 {
+    let z0 = poses.first().map_or(0.0, |p| p.p[2]);
+    poses
+        .iter()
+        .map(|p| (p.p[2] - z0).abs())
+        .fold(0.0, f64::max)
+}
+
 fn ate_of(s: &Session, est: &[milliego_session::TumPose]) -> f64 {
     let gt = Trajectory::from_tum(&s.groundtruth().unwrap().expect("ground truth"));
     evaluate(&gt, &Trajectory::from_tum(est), &Settings::default())
@@ -267,17 +276,8 @@ fn leakage_and_coarse_doppler_do_not_let_the_vertical_velocity_run_away() {
     cfg.doppler_step_from_cfg = false;
     cfg.ego.near_field_m = 1.0;
     let r = run(&s, &cfg).expect("offline run");
-    let z0 = r.trajectory[0].p[2];
-    let dz = r
-        .trajectory
-        .iter()
-        .map(|p| (p.p[2] - z0).abs())
-        .fold(0.0, f64::max);
-    let gt = s.groundtruth().unwrap().expect("ground truth");
-    let gz = gt
-        .iter()
-        .map(|p| (p.p[2] - gt[0].p[2]).abs())
-        .fold(0.0, f64::max);
+    let dz = height_wander(&r.trajectory);
+    let gz = height_wander(&s.groundtruth().unwrap().expect("ground truth"));
     println!(
         "outdoor, leakage 24%, Doppler step 0.49 m/s: height wander {dz:.2} m (truth {gz:.2} m), {} vertical bounds, {} near-field points not voting, ego ok {} of {}",
         r.vertical_bounds, r.near_field_points, r.ego_ok, r.radar_frames
@@ -489,20 +489,10 @@ fn lost_imu_samples_widen_the_velocity_so_the_barometer_holds_the_height() {
         sc.imu_gap_share = 0.34;
         sc.baro_hz = 50.0;
         let (_dir, s) = simulated(&sc);
-        let gt = s.groundtruth().unwrap().expect("ground truth");
-        let gz = gt
-            .iter()
-            .map(|p| (p.p[2] - gt[0].p[2]).abs())
-            .fold(0.0, f64::max);
+        let gz = height_wander(&s.groundtruth().unwrap().expect("ground truth"));
         let wander = |cfg: &OfflineConfig| {
             let r = run(&s, cfg).expect("offline run");
-            let z0 = r.trajectory[0].p[2];
-            let dz = r
-                .trajectory
-                .iter()
-                .map(|p| (p.p[2] - z0).abs())
-                .fold(0.0, f64::max);
-            (dz, r)
+            (height_wander(&r.trajectory), r)
         };
         let (dz, r) = wander(&OfflineConfig::default());
         let mut off = OfflineConfig::default();

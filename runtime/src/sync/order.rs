@@ -534,9 +534,10 @@ impl Synchroniser {
 /// at or after its time) through two queues, so the thread on the other side sees them in
 /// batches whose sizes depend on how the two threads interleave. Polled once per batch, at the
 /// feeder's watermark, the synchroniser would judge stalls (a gap in the IMU) at whatever time
-/// the batch happened to end, and its releases (and flags) would differ from run to run. Here each item goes in at its feed time
-/// ([`ImuItem::fed_s`], [`RadarItem::fed_s`]), and the synchroniser is polled at that time: what
-/// it releases depends on the session alone, as if it ran in the feeder's thread.
+/// the batch happened to end, and its releases (and flags) would differ from run to run. Here
+/// each item goes in at its feed time ([`ImuItem::fed_s`], [`RadarItem::fed_s`]), and the
+/// synchroniser is polled at that time: what it releases depends on the session alone, as if it
+/// ran in the feeder's thread.
 #[derive(Debug)]
 pub struct FeedOrder {
     imu: VecDeque<ImuItem>,
