@@ -8,8 +8,11 @@
 //!   (within the Doppler noise) and its ego-velocity is consistent with zero under its own
 //!   covariance (chi-square, 3 dof, 99.9%);
 //! * moving: its ego-velocity is inconsistent with zero, or fewer than
-//!   [`RestConfig::moving_share_max`] of its points (at least [`MIN_SHARE_POINTS`] of them) have
-//!   zero Doppler, with or without an ego-velocity;
+//!   [`RestConfig::moving_share_max`] of its points have zero Doppler, with or without an
+//!   ego-velocity, and so few that rest would show that few less than
+//!   [`RestConfig::moving_share_alpha`] of the time (binomial, each point static with
+//!   probability [`RestConfig::zero_doppler_share_min`]): 1 of 8 points at zero Doppler is what
+//!   a sparse scene at rest shows every few frames, 0 of 20 is motion;
 //! * no verdict otherwise. A radar in a horizontal fan hardly sees
 //!   vertical velocity (0.1-0.5 m/s vertical noise at rest in the simulator), so the estimate's
 //!   size alone cannot call rest.
@@ -35,7 +38,9 @@
 //! [`crate::rio::Rio::zero_rate`]) every [`RestConfig::update_period_s`]: the velocity stays zero,
 //! the position where the rest began (a tilt or accelerometer-bias error would otherwise creep it
 //! by millimetres per update, and is learned instead), the gyroscope bias is learned from the
-//! whole rest (not only from the levelling window) and the heading stops drifting. Without radar
+//! whole rest (not only from the levelling window; its last [`RestConfig::rate_margin_s`] only
+//! once the rest has outlasted them, so the slow start of a motion the stillness test has not
+//! yet seen is never taken for bias) and the heading stops drifting. Without radar
 //! (IMU dead reckoning) the body is never taken to be at rest.
 //!
 //! No allocation after construction: the window is a ring of at most [`REST_CAPACITY`] samples.
@@ -47,9 +52,6 @@ use std::collections::VecDeque;
 /// IMU samples kept for the stillness test at most (the window shrinks to this many at high
 /// rates: 1.28 s at 400 Hz).
 pub const REST_CAPACITY: usize = 512;
-
-/// Fewest points for a frame's zero-Doppler share to say "moving" on its own.
-pub const MIN_SHARE_POINTS: usize = 5;
 
 /// Shortest IMU window the stillness test decides on \[s\].
 pub const MIN_SPAN_S: f64 = 0.1;
@@ -85,6 +87,12 @@ pub struct RestConfig {
     pub zero_doppler_share_min: f64,
     /// Largest share of points with zero Doppler in a frame that says "moving".
     pub moving_share_max: f64,
+    /// How improbable at rest a frame's count of zero-Doppler points must be for it to say
+    /// "moving" (the binomial tail, each point static with probability
+    /// [`RestConfig::zero_doppler_share_min`]). Frames of a few points say nothing by their
+    /// share: at rest a handful of clutter and false alarms with their own Doppler outnumber the
+    /// static points often enough, and a false "moving" ends a rest.
+    pub moving_share_alpha: f64,
     /// The radar's verdict counts this long after its frame \[s\].
     pub radar_max_age_s: f64,
     /// Time between two pairs of rest updates \[s\].
@@ -95,9 +103,16 @@ pub struct RestConfig {
     /// Standard deviation of the position-hold pseudo-measurement \[m\]: at rest the position
     /// stays where the rest began.
     pub hold_position_std: f64,
-    /// Floor of the zero-rate pseudo-measurement's standard deviation \[rad/s\] (its white-noise
-    /// part is the gyro noise density over the update period).
+    /// Floor of the zero-rate pseudo-measurement's standard deviation \[rad/s\] per update
+    /// period (its white-noise part is the gyro noise density over the span it averages).
     pub zero_rate_std_min: f64,
+    /// The zero-rate measurement takes a rest's rate of turn only once the rest has outlasted
+    /// it by this long \[s\]; a rest that ends drops its latest this-long. The stillness test
+    /// sees a slow start of motion (a robot easing into a turn from rest) only once its window
+    /// holds enough of it, and that onset taken as gyroscope bias would turn the heading for
+    /// the rest of the session (the radar cannot see heading). Zero-velocity and
+    /// position-hold updates are not held back: the radar corrects what they get wrong.
+    pub rate_margin_s: f64,
 }
 
 impl Default for RestConfig {
@@ -112,11 +127,13 @@ impl Default for RestConfig {
             gravity_tolerance: 0.3,
             zero_doppler_share_min: 0.35,
             moving_share_max: 0.15,
+            moving_share_alpha: 0.01,
             radar_max_age_s: 0.3,
             update_period_s: 0.05,
             zero_velocity_std: 0.01,
             hold_position_std: 0.001,
             zero_rate_std_min: 0.002,
+            rate_margin_s: 0.5,
         }
     }
 }
@@ -132,9 +149,12 @@ pub struct RestDetector {
     resting: [bool; 2],
     /// Whether the IMU was still at the last decided sample, and at the one before it.
     still: [bool; 2],
-    /// Rate-of-turn sum and sample count since the last rest update (the zero-rate measurement).
+    /// Rate-of-turn sum and sample count since the last rest update.
     gyro_sum: Vector3<f64>,
     gyro_n: u32,
+    /// The current rest's rates of turn not yet taken, one entry per rest update: its time
+    /// \[s\], rate sum, sample count and span \[s\] ([`RestConfig::rate_margin_s`]).
+    held: VecDeque<(f64, Vector3<f64>, u32, f64)>,
     since: Option<f64>,
     last_update: Option<f64>,
     /// The filter refuted the last rest ([`RestDetector::refute`]): no rest until the IMU has
@@ -144,6 +164,10 @@ pub struct RestDetector {
     /// was still and no frame said moving.
     initial: bool,
 }
+
+/// Rest updates whose rates of turn are held back at most ([`RestConfig::rate_margin_s`]: 1.6 s
+/// at the 50 ms update period; beyond, the oldest is taken early).
+const HELD_CAPACITY: usize = 32;
 
 /// Radar verdicts kept (frames come every 30-100 ms, IMU samples every 2.5-10 ms: one or two
 /// lie ahead of the sample being evaluated at most).
@@ -165,10 +189,9 @@ pub enum Verdict {
 pub struct RestUpdate {
     /// Time of the sample at rest \[s\].
     pub t: f64,
-    /// Mean rate of turn since the previous rest update \[rad/s\].
-    pub mean_gyro: Vector3<f64>,
-    /// Over this long \[s\].
-    pub span_s: f64,
+    /// The zero-rate measurement, when the rest has outlasted some of its rates by
+    /// [`RestConfig::rate_margin_s`]: their mean \[rad/s\] and the span they cover \[s\].
+    pub rate: Option<(Vector3<f64>, f64)>,
     /// The first update of this rest (the position to hold is taken now).
     pub first: bool,
 }
@@ -184,6 +207,7 @@ impl RestDetector {
             still: [false; 2],
             gyro_sum: Vector3::zeros(),
             gyro_n: 0,
+            held: VecDeque::with_capacity(HELD_CAPACITY),
             since: None,
             last_update: None,
             refuted: false,
@@ -213,7 +237,11 @@ impl RestDetector {
             c.try_inverse()
                 .map_or(f64::INFINITY, |ci| (v.transpose() * ci * v)[(0, 0)])
         });
-        let verdict = if (points >= MIN_SHARE_POINTS && share < self.cfg.moving_share_max)
+        let improbable_at_rest = || {
+            binomial_cdf(zero_doppler, points, self.cfg.zero_doppler_share_min)
+                < self.cfg.moving_share_alpha
+        };
+        let verdict = if (share < self.cfg.moving_share_max && improbable_at_rest())
             || d2.is_some_and(|d2| d2 > ZERO_GATE)
         {
             Verdict::Moving
@@ -268,9 +296,7 @@ impl RestDetector {
         let now = still && !self.refuted && self.radar_agrees(s.t);
         self.resting = [now, self.resting[0]];
         if !now {
-            self.since = None;
-            self.gyro_sum = Vector3::zeros();
-            self.gyro_n = 0;
+            self.end_rest();
             return None;
         }
         self.gyro_sum += Vector3::from(s.gyro);
@@ -280,16 +306,42 @@ impl RestDetector {
         if s.t - from < self.cfg.update_period_s {
             return None;
         }
-        let u = RestUpdate {
-            t: s.t,
-            mean_gyro: self.gyro_sum / f64::from(self.gyro_n.max(1)),
-            span_s: s.t - from,
-            first: self.last_update.is_none_or(|l| l < since),
-        };
+        if self.held.len() == HELD_CAPACITY {
+            self.held.pop_front();
+        }
+        self.held
+            .push_back((s.t, self.gyro_sum, self.gyro_n, s.t - from));
         self.gyro_sum = Vector3::zeros();
         self.gyro_n = 0;
+        // The rates the rest has outlasted by the margin are taken.
+        let u = RestUpdate {
+            t: s.t,
+            rate: self.take_held(s.t - self.cfg.rate_margin_s),
+            first: self.last_update.is_none_or(|l| l < since),
+        };
         self.last_update = Some(s.t);
         Some(u)
+    }
+
+    /// The held rates up to `until` \[s\], taken: their mean \[rad/s\] and span \[s\].
+    fn take_held(&mut self, until: f64) -> Option<(Vector3<f64>, f64)> {
+        let (mut sum, mut n, mut span) = (Vector3::zeros(), 0, 0.0);
+        while let Some(&(t, g, k, dt)) = self.held.front() {
+            if t > until {
+                break;
+            }
+            self.held.pop_front();
+            (sum, n, span) = (sum + g, n + k, span + dt);
+        }
+        (n > 0).then(|| (sum / f64::from(n), span))
+    }
+
+    /// The rest is over: its rates not yet taken go with it.
+    fn end_rest(&mut self) {
+        self.since = None;
+        self.gyro_sum = Vector3::zeros();
+        self.gyro_n = 0;
+        self.held.clear();
     }
 
     /// The filter's velocity says the body is not at rest (a smooth cruise keeps the IMU as
@@ -298,9 +350,7 @@ impl RestDetector {
     pub fn refute(&mut self) {
         self.refuted = true;
         self.resting[0] = false;
-        self.since = None;
-        self.gyro_sum = Vector3::zeros();
-        self.gyro_n = 0;
+        self.end_rest();
     }
 
     /// Whether the rest the session starts in is still uncontradicted (see the module
@@ -385,6 +435,22 @@ impl RestDetector {
     }
 }
 
+/// Probability of at most `k` successes in `n` independent trials of probability `p` (summed
+/// in logarithms: the first terms underflow for hundreds of points, the ones that matter do not).
+fn binomial_cdf(k: usize, n: usize, p: f64) -> f64 {
+    if k >= n {
+        return 1.0;
+    }
+    let (lp, lq) = (p.ln(), (1.0 - p).ln());
+    let mut log_term = n as f64 * lq;
+    let mut sum = log_term.exp();
+    for i in 0..k {
+        log_term += ((n - i) as f64 / (i + 1) as f64).ln() + lp - lq;
+        sum += log_term.exp();
+    }
+    sum.min(1.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -441,8 +507,16 @@ mod tests {
         // The first sample decided at rest is the first at or past the frame.
         assert!(ups[0].t >= 1.0 && ups[0].t < 1.0 + 0.05 + 0.006, "{ups:?}");
         // The zero-rate measurement is the mean rate over the span.
-        assert!((ups[1].mean_gyro - Vector3::new(0.003, -0.002, 0.001)).norm() < 1e-3);
-        assert!((ups[1].span_s - 0.05).abs() < 0.006);
+        // (Once the rest has outlasted it: at_once has no margin.)
+        let mut at_once = RestDetector::new(RestConfig {
+            rate_margin_s: 0.0,
+            ..RestConfig::default()
+        });
+        feed(&mut at_once, 0.0, 1.0);
+        at_once.push_radar(1.0, ZERO, 12, 20);
+        let (mean_gyro, span_s) = feed(&mut at_once, 1.0, 1.3)[1].rate.expect("a rate");
+        assert!((mean_gyro - Vector3::new(0.003, -0.002, 0.001)).norm() < 1e-3);
+        assert!((span_s - 0.05).abs() < 0.006);
         // A frame full of multipath gives no verdict: the rest goes on past the verdict's age.
         d.push_radar(1.3, ZERO, 4, 20);
         assert!(!feed(&mut d, 1.3, 2.0).is_empty() && d.resting());
@@ -540,5 +614,83 @@ mod tests {
         });
         d.push_radar(0.5, ZERO, 20, 20);
         assert!(feed(&mut d, 0.0, 2.0).is_empty());
+    }
+
+    #[test]
+    fn the_binomial_tail_is_exact_and_never_underflows() {
+        assert!((binomial_cdf(0, 5, 0.35) - 0.65f64.powi(5)).abs() < 1e-12);
+        // sum_{i<=2} C(14,i) 0.35^i 0.65^(14-i), and the same for 40 points.
+        assert!((binomial_cdf(2, 14, 0.35) - 0.083_926_573_726).abs() < 1e-9);
+        assert!((binomial_cdf(2, 40, 0.35) - 8.169_521_461_6e-6).abs() < 1e-13);
+        assert_eq!(binomial_cdf(5, 5, 0.35), 1.0);
+        // 2000 points: the first terms underflow, the tail around the mean does not.
+        let mid = binomial_cdf(700, 2000, 0.35);
+        assert!(mid > 0.4 && mid < 0.6, "{mid}");
+        assert!(binomial_cdf(500, 2000, 0.35) < 1e-20);
+    }
+
+    #[test]
+    fn a_sparse_frame_says_moving_by_its_share_only_when_rest_could_hardly_show_it() {
+        let mut d = RestDetector::new(RestConfig::default());
+        // At rest a sparse scene shows 0 of 5 or 1 of 8 points at zero Doppler every few
+        // frames (12% and 17% of the time with 35% static points): no verdict.
+        assert_eq!(d.push_radar(0.0, None, 0, 5), Verdict::None);
+        assert_eq!(d.push_radar(0.05, None, 1, 8), Verdict::None);
+        assert_eq!(d.push_radar(0.1, None, 2, 14), Verdict::None);
+        // 0 of 20, 2 of 40: motion.
+        assert_eq!(d.push_radar(0.15, None, 0, 20), Verdict::Moving);
+        assert_eq!(d.push_radar(0.2, None, 2, 40), Verdict::Moving);
+        // A share above the bound never says moving, however many points.
+        assert_eq!(d.push_radar(0.25, None, 80, 400), Verdict::None);
+        // The ego-velocity still says moving on its own in a sparse frame.
+        assert_eq!(d.push_radar(0.3, FAST, 0, 5), Verdict::Moving);
+    }
+
+    #[test]
+    fn a_rests_rate_of_turn_is_taken_once_the_rest_has_outlasted_it() {
+        let cfg = RestConfig::default();
+        let mut d = RestDetector::new(cfg);
+        feed(&mut d, 0.0, 1.0);
+        d.push_radar(1.0, ZERO, 12, 20);
+        let ups = feed(&mut d, 1.0, 2.0);
+        assert!(d.resting() && ups.len() >= 15, "{ups:?}");
+        // Zero-velocity updates from the start; the rates only once the rest is 0.5 s old,
+        // each then the one of an update period 0.5 s back.
+        for u in &ups {
+            let age = u.t - ups[0].t;
+            if age < cfg.rate_margin_s - 0.003 {
+                assert!(u.rate.is_none(), "{u:?}");
+            } else if age > cfg.rate_margin_s + 0.003 {
+                assert!(u.rate.is_some(), "{u:?}");
+            }
+            if let Some((mean, span)) = u.rate {
+                assert!((mean - Vector3::new(0.003, -0.002, 0.001)).norm() < 1e-3);
+                assert!((span - cfg.update_period_s).abs() < 0.006, "{u:?}");
+            }
+        }
+        assert!(ups.iter().filter(|u| u.rate.is_some()).count() >= 8);
+        // A rest the IMU ends within its first 0.5 s gives no rate at all: what it held may be
+        // the start of the motion.
+        let shake = ImuSample {
+            t: 2.0,
+            accel: [3.0, 0.0, 9.81],
+            gyro: [0.0, 0.5, 0.0],
+        };
+        d.push_imu(&shake);
+        let mut later = feed(&mut d, 2.005, 3.0);
+        d.push_radar(3.0, ZERO, 12, 20);
+        later.extend(feed(&mut d, 3.0, 3.4));
+        assert!(d.resting() && !later.is_empty(), "{later:?}");
+        assert!(later.iter().all(|u| u.rate.is_none()), "{later:?}");
+        // Without the margin every update takes its own rates.
+        let mut at_once = RestDetector::new(RestConfig {
+            rate_margin_s: 0.0,
+            ..cfg
+        });
+        feed(&mut at_once, 0.0, 1.0);
+        at_once.push_radar(1.0, ZERO, 12, 20);
+        assert!(feed(&mut at_once, 1.0, 1.4)
+            .iter()
+            .all(|u| u.rate.is_some()));
     }
 }

@@ -728,7 +728,12 @@ impl Runner {
             if let Some(a) = self.rest_anchor {
                 rio.hold_position(a, c.hold_position_std);
             }
-            rio.zero_rate(u.mean_gyro, u.span_s, c.zero_rate_std_min);
+            if let Some((mean_gyro, span_s)) = u.rate {
+                // The floor is per update period: a span of k periods counts as k of them.
+                let periods = (span_s / c.update_period_s).round().max(1.0);
+                let floor = c.zero_rate_std_min / periods.sqrt();
+                rio.zero_rate(mean_gyro, span_s, floor);
+            }
         }
         let before = *rio.counters();
         rio.push_imu(s);
