@@ -228,14 +228,20 @@ pub struct EgoVelocityEstimator {
 impl EgoVelocityEstimator {
     /// An estimator with `cfg`.
     pub fn new(cfg: Config) -> Self {
+        Self::with_capacity(cfg, 0)
+    }
+
+    /// An estimator with `cfg` whose working buffers hold frames of up to `points` points
+    /// without allocating (a larger frame grows them once).
+    pub fn with_capacity(cfg: Config, points: usize) -> Self {
         EgoVelocityEstimator {
             cfg,
-            dirs: Vec::new(),
-            vr: Vec::new(),
-            voter: Vec::new(),
-            idx: Vec::new(),
-            inl: Vec::new(),
-            inlier_dirs: Vec::new(),
+            dirs: Vec::with_capacity(points),
+            vr: Vec::with_capacity(points),
+            voter: Vec::with_capacity(points),
+            idx: Vec::with_capacity(points),
+            inl: Vec::with_capacity(points),
+            inlier_dirs: Vec::with_capacity(points),
         }
     }
 

@@ -154,6 +154,8 @@ pub struct OfflineResult {
     pub rest_updates: u64,
     /// Vertical velocity bounds applied ([`RioConfig::vertical_velocity_std`]).
     pub vertical_bounds: u64,
+    /// Horizontal velocity bounds applied ([`RioConfig::horizontal_velocity_std`]).
+    pub horizontal_bounds: u64,
     /// Mean normalised innovation square of the applied radar updates (3 when consistent).
     pub nis_mean: Option<f64>,
     /// Barometer readings in the session.
@@ -359,6 +361,7 @@ pub fn run_with_motions(
         rest_samples: c.rest_samples,
         rest_updates: filter.rest_updates,
         vertical_bounds: filter.vertical_bounds,
+        horizontal_bounds: filter.horizontal_bounds,
         nis_mean: runner.filter().and_then(|f| f.nis_mean()),
         pressure_readings: baro.len(),
         baro_updates: filter.baro_updates,

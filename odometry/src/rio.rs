@@ -78,6 +78,14 @@ pub struct RioConfig {
     /// rarely climb faster), so a frame that cannot see vertical motion cannot let it run away
     /// (`f64::INFINITY`: never).
     pub vertical_velocity_std: f64,
+    /// Horizontal velocity bound \[m/s\]: at a radar frame, when the filter is less sure of a
+    /// world horizontal velocity component than this, it takes "that component 0" with this
+    /// deviation: a handheld, headworn or robot rig moves at walking pace (1.4 m/s in any
+    /// direction is about 1 m/s per axis), so where the radar gives no velocity for many
+    /// seconds (a sparse outdoor scene, a radar tilted at the sky) the IMU alone cannot run
+    /// the velocity away to 10 m/s. A filter that knows its velocity is never touched. Ground
+    /// vehicles ([`RioConfig::nonholonomic_std`] finite) are exempt; `f64::INFINITY`: never.
+    pub horizontal_velocity_std: f64,
     /// Uncertainty of a radar measurement's time on the IMU clock \[s\] (exposure spread,
     /// clock mapping): the measurement covariance gains `J J^T sigma_t^2`, `J` the rate of change
     /// of the predicted radar velocity (body acceleration, rotation of the body velocity, angular
@@ -124,6 +132,7 @@ impl Default for RioConfig {
             reanchor_after: 5,
             radar_heading: false,
             vertical_velocity_std: 0.5,
+            horizontal_velocity_std: 1.0,
             time_sigma_s: 0.005,
             baro_std_m: 0.3,
             baro_bias_walk: 0.02,
@@ -187,6 +196,8 @@ pub struct RioCounters {
     pub rest_updates: u64,
     /// Vertical velocity bounds applied ([`RioConfig::vertical_velocity_std`]).
     pub vertical_bounds: u64,
+    /// Horizontal velocity bounds applied ([`RioConfig::horizontal_velocity_std`]).
+    pub horizontal_bounds: u64,
     /// Barometric heights applied.
     pub baro_updates: u64,
     /// Barometric heights rejected (not finite, or outside a 99.9% gate).
@@ -530,6 +541,7 @@ impl Rio {
     /// the filter is uncertain of it by more than [`RioConfig::vertical_velocity_std`],
     /// "vertical velocity 0" with that deviation.
     fn bound_vertical(&mut self, unseen: bool) {
+        self.bound_horizontal();
         let std = self.cfg.vertical_velocity_std;
         if !(std.is_finite() && std > 0.0) || !(unseen || self.p[(5, 5)] > std * std) {
             return;
@@ -538,6 +550,35 @@ impl Rio {
         h[5] = 1.0;
         self.scalar_update(&h, -self.nav.state().v.z, std * std);
         self.counters.vertical_bounds += 1;
+    }
+
+    /// Horizontal velocity bound ([`RioConfig::horizontal_velocity_std`]): each world horizontal
+    /// component the filter is less sure of than the bound is taken as 0 with that deviation,
+    /// heading kept out of the gain as for radar updates.
+    fn bound_horizontal(&mut self) {
+        let std = self.cfg.horizontal_velocity_std;
+        if !(std.is_finite() && std > 0.0) || self.cfg.nonholonomic_std.is_finite() {
+            return;
+        }
+        let var = std * std;
+        let lost = [self.p[(3, 3)] > var, self.p[(4, 4)] > var];
+        if !lost.contains(&true) {
+            return;
+        }
+        // Rows for the lost components; a zero row with zero innovation changes nothing.
+        let mut h = M3xN::zeros();
+        let v = self.nav.state().v;
+        let mut y = Vector3::zeros();
+        for (k, _) in lost.iter().enumerate().filter(|(_, l)| **l) {
+            h[(k, 3 + k)] = 1.0;
+            y[k] = -v[k];
+        }
+        let rm = Matrix3::from_diagonal(&Vector3::new(var, var, 1.0));
+        let s = h * self.p * h.transpose() + rm;
+        if let Some(si) = s.try_inverse() {
+            self.correct(&y, &h, &rm, &si, !self.cfg.radar_heading);
+            self.counters.horizontal_bounds += 1;
+        }
     }
 
     /// A scalar measurement: innovation `y`, Jacobian row `h`, variance `r` (Joseph form).

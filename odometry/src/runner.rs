@@ -155,8 +155,9 @@ pub struct ClassicalConfig {
     /// directions) are kept this long \[s\]: their points, each carried to a later frame with
     /// the rotation and the velocity change the IMU integrated in between, join that frame's
     /// points when it cannot decide alone either. Sparse scenes (an atrium, outdoors) then still
-    /// give velocities. Each point serves one estimate at most. 0 (the default): off; on the
-    /// benchmark it helped the validation sets and not the held-out ones (docs/odometry.md).
+    /// give velocities. Each point serves one estimate at most. Default 0.15 s (the frame
+    /// and up to three before it at 20 Hz), chosen on split v2's validation and training sets
+    /// and v1's validation set (docs/odometry.md); 0: off.
     pub stack_window_s: f64,
 }
 
@@ -171,7 +172,7 @@ impl Default for ClassicalConfig {
             rest: RestConfig::default(),
             imu_gap_s: 0.1,
             learned: LearnedConfig::default(),
-            stack_window_s: 0.0,
+            stack_window_s: 0.15,
         }
     }
 }
@@ -338,13 +339,17 @@ impl Runner {
             rio: None,
             level: Vec::with_capacity(LEVEL_CAPACITY),
             early: Vec::with_capacity(EARLY_CAPACITY),
-            ego: EgoVelocityEstimator::new(cfg.ego),
-            ego_stacked: EgoVelocityEstimator::new(EgoConfig {
-                min_inliers: cfg.ego.min_inliers.max(STACK_MIN_INLIERS),
-                min_inlier_share: cfg.ego.min_inlier_share.max(STACK_MIN_INLIER_SHARE),
-                ..cfg.ego
-            }),
-            est: Estimate::with_capacity(1024),
+            ego: EgoVelocityEstimator::with_capacity(cfg.ego, 1024),
+            // A stacked frame: its own points and up to STACK_POINTS carried ones.
+            ego_stacked: EgoVelocityEstimator::with_capacity(
+                EgoConfig {
+                    min_inliers: cfg.ego.min_inliers.max(STACK_MIN_INLIERS),
+                    min_inlier_share: cfg.ego.min_inlier_share.max(STACK_MIN_INLIER_SHARE),
+                    ..cfg.ego
+                },
+                2 * STACK_POINTS,
+            ),
+            est: Estimate::with_capacity(2 * STACK_POINTS),
             dets: Vec::with_capacity(1024),
             lattice: DopplerLattice::new(),
             configured_step: cfg.ego.doppler_step,

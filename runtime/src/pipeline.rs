@@ -462,6 +462,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         radar_time_offset: stage_ends.radar_time_offset,
         doppler_step: stage_ends.doppler_step,
         learned: stage_ends.learned,
+        filter: stage_ends.filter,
         out: &out,
         radar_report: session_radar_report.as_ref(),
     };
@@ -810,6 +811,7 @@ fn spawn_stage(
             radar_time_offset: stage.radar_time_offset(),
             doppler_step: stage.doppler_step(),
             learned: stage.learned(),
+            filter: stage.filter(),
         };
         (hist, stage.counters, ends, handoff)
     })
@@ -947,6 +949,7 @@ struct StageEnds {
     radar_time_offset: Option<(f64, f64)>,
     doppler_step: Option<(f32, Option<f32>)>,
     learned: Option<crate::summary::LearnedSummary>,
+    filter: Option<crate::summary::FilterSummary>,
 }
 
 /// What the stages reported at the end of a run.
@@ -960,6 +963,7 @@ struct RunEnds<'a> {
     radar_time_offset: Option<(f64, f64)>,
     doppler_step: Option<(f32, Option<f32>)>,
     learned: Option<crate::summary::LearnedSummary>,
+    filter: Option<crate::summary::FilterSummary>,
     out: &'a OutputEnd,
     radar_report: Option<&'a StreamReport>,
 }
@@ -1073,6 +1077,7 @@ fn run_summary(e: &RunEnds<'_>, sh: &Shared, c: &InputCounters, latency: &Latenc
         view_dropped: sh.view.as_ref().map_or(0, ViewTap::dropped),
         view_client_dropped: 0,
         learned: e.learned.clone(),
+        filter: e.filter,
     }
 }
 

@@ -120,6 +120,14 @@ impl Stage {
             .or_else(|| self.built.fallback.as_ref().and_then(|f| f.doppler_step()))
     }
 
+    /// What the Doppler filter did, the primary's first.
+    pub fn filter(&self) -> Option<crate::summary::FilterSummary> {
+        self.built
+            .primary
+            .filter()
+            .or_else(|| self.built.fallback.as_ref().and_then(|f| f.filter()))
+    }
+
     /// What became of the learned measurements (the fused estimator only).
     pub fn learned(&self) -> Option<crate::summary::LearnedSummary> {
         let mut l = self.built.primary.learned()?;

@@ -54,6 +54,50 @@ pub struct RunSummary {
     /// absent for the other estimators.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub learned: Option<LearnedSummary>,
+    /// What the Doppler filter did with its measurements (the estimators that run it: `doppler`,
+    /// `fused`, `auto`); absent for the others.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub filter: Option<FilterSummary>,
+}
+
+/// What the error-state filter did with each kind of measurement (docs/odometry.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct FilterSummary {
+    /// Radar ego-velocities applied.
+    pub radar_updates: u64,
+    /// Radar ego-velocities beyond the chi-square gate (not applied).
+    pub radar_gated: u64,
+    /// Times a run of gated radar measurements re-anchored the velocity.
+    pub radar_reanchors: u64,
+    /// Zero-velocity, position-hold and zero-rate updates at rest.
+    pub rest_updates: u64,
+    /// "Vertical velocity 0" bounds at frames that could not see it.
+    pub vertical_bounds: u64,
+    /// "Horizontal velocity 0" bounds where the filter had lost its velocity (no radar velocity
+    /// for long; not for ground vehicles).
+    pub horizontal_bounds: u64,
+    /// Barometric heights applied.
+    pub baro_updates: u64,
+    /// Barometric heights rejected (not finite, or beyond the 99.9% gate).
+    pub baro_rejected: u64,
+    /// Times the height re-anchored to the barometer after a second of rejections.
+    pub baro_reanchors: u64,
+}
+
+impl From<milliego_odometry::rio::RioCounters> for FilterSummary {
+    fn from(c: milliego_odometry::rio::RioCounters) -> Self {
+        FilterSummary {
+            radar_updates: c.updates,
+            radar_gated: c.gated,
+            radar_reanchors: c.reanchors,
+            rest_updates: c.rest_updates,
+            vertical_bounds: c.vertical_bounds,
+            horizontal_bounds: c.horizontal_bounds,
+            baro_updates: c.baro_updates,
+            baro_rejected: c.baro_rejected,
+            baro_reanchors: c.baro_reanchors,
+        }
+    }
 }
 
 /// What became of the learned model's relative motions in the fused estimator

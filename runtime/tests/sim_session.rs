@@ -166,6 +166,16 @@ fn offline_run_reproduces_milliego_odometry_with_a_barometer() {
     assert!(r.frames_in.pressure > 350, "{:?}", r.frames_in);
     assert!(r.barometer.contains("aid the height"), "{}", r.barometer);
     assert_eq!(r.drops.pressure, 0, "50 Hz readings beside 200 Hz samples");
+    // The summary says what the filter did with them, as `milliego odometry` does.
+    let f = r.filter.expect("the Doppler filter's counters");
+    let o = run_offline(&s, &OfflineConfig::default()).unwrap();
+    println!("runtime filter {f:?}");
+    assert!(f.baro_updates > 300, "{f:?}");
+    assert_eq!(
+        (f.baro_updates, f.baro_rejected, f.baro_reanchors),
+        (o.baro_updates, o.baro_rejected, o.baro_reanchors)
+    );
+    assert_eq!((f.radar_updates, f.radar_gated), (o.updates, o.gated));
 }
 
 #[test]

@@ -331,7 +331,9 @@ fn a_barometer_carries_the_height_through_a_climb_the_radar_cannot_see() {
 #[test]
 fn the_radar_time_offset_is_estimated_where_the_stamps_are_not_trusted() {
     // Radar stamps 40 ms late (a host-stamped or bag-arrival-timed stream): the filter estimates
-    // the offset from the Doppler updates and ends closer to the truth than without.
+    // the offset from the Doppler updates. On handheld walks 40 ms (even 100 ms) of lateness
+    // moves the ATE by less than seed-to-seed noise (over seeds 3-7 the estimate was better on
+    // three, worse on two), so the ATE is only held to "no worse than not estimating".
     let mut sc = Scenario::new(Family::Office, MotionKind::Handheld, 3);
     sc.duration_s = 40.0;
     let (_dir, s) = simulated(&sc);
@@ -369,7 +371,7 @@ fn the_radar_time_offset_is_estimated_where_the_stamps_are_not_trusted() {
     assert!(o0.abs() < 0.01, "offset {o0} s where there is none");
     assert!((o + 0.04).abs() < 0.01, "offset {o} s, expected -0.04 s");
     assert!(sd < 0.01, "offset std {sd} s");
-    assert!(a_fixed < a_late, "{a_fixed} vs {a_late} m");
+    assert!(a_fixed < a_late * 1.1 + 0.05, "{a_fixed} vs {a_late} m");
 }
 
 #[test]
@@ -544,6 +546,45 @@ fn a_robot_easing_into_a_turn_from_standstill_is_not_taken_for_gyro_bias() {
         assert!(
             h_rio <= h_gyro + 2.0,
             "seed {seed}: heading error {h_rio:.2} deg vs gyro alone {h_gyro:.2} deg"
+        );
+    }
+}
+
+#[test]
+fn a_walk_the_radar_hardly_sees_does_not_run_away_horizontally() {
+    // Two outdoor walks of split v2's training set with MEMS IMUs where the radar (tilted up,
+    // sparse scene) gives no velocity for 10-30 s at a time: the IMU alone ran them away at up
+    // to 10 m/s, 94 m and 9 m of ATE. The horizontal bound
+    // (`RioConfig::horizontal_velocity_std`) keeps a lost filter at walking pace. Stacking is
+    // off here: it finds velocities in some of these frames (with it both walks end under 9 m
+    // with or without the bound), and the bound is for the stretches it cannot fill.
+    use milliego_sim::split::{Set, SplitVersion};
+    let entries = SplitVersion::V2.entries(Set::Train);
+    for seed in [1102, 1100] {
+        let e = entries
+            .iter()
+            .find(|e| {
+                e.family == Family::Outdoor && e.motion == MotionKind::Handheld && e.seed == seed
+            })
+            .expect("an outdoor walk of the training set");
+        let (_dir, s) = simulated(&e.scenario());
+        let path = ate(&s, Estimator::Doppler).1;
+        let on = OfflineConfig {
+            stack_window_s: 0.0,
+            ..OfflineConfig::default()
+        };
+        let r = run(&s, &on).expect("offline run");
+        let mut off = on;
+        off.rio.horizontal_velocity_std = f64::INFINITY;
+        let r_off = run(&s, &off).expect("offline run");
+        let (a, a_off) = (ate_of(&s, &r.trajectory), ate_of(&s, &r_off.trajectory));
+        println!(
+            "seed {seed}: {} of {} frames gave a velocity, {} horizontal bounds; ATE {a:.2} m ({a_off:.2} m without the bound) over {path:.1} m",
+            r.ego_ok, r.radar_frames, r.horizontal_bounds
+        );
+        assert!(
+            a < 0.25 * path,
+            "seed {seed}: ATE {a:.2} m over {path:.1} m"
         );
     }
 }

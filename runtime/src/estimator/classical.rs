@@ -64,6 +64,12 @@ impl Estimator for Classical {
         self.runner.uses_radar().then(|| self.runner.doppler_step())
     }
 
+    fn filter(&self) -> Option<crate::summary::FilterSummary> {
+        self.runner
+            .uses_radar()
+            .then(|| self.runner.filter_counters().into())
+    }
+
     fn name(&self) -> &'static str {
         if self.runner.uses_radar() {
             "doppler"

@@ -110,6 +110,10 @@ impl Estimator for Fused {
         self.classical.doppler_step()
     }
 
+    fn filter(&self) -> Option<crate::summary::FilterSummary> {
+        Estimator::filter(&self.classical)
+    }
+
     fn learned(&self) -> Option<LearnedSummary> {
         let r = self.classical.runner();
         let c = r.learned_counters();

@@ -123,6 +123,10 @@ pub trait Estimator: Send {
     fn learned(&self) -> Option<crate::summary::LearnedSummary> {
         None
     }
+    /// What the Doppler filter did with its measurements, when the estimator runs one.
+    fn filter(&self) -> Option<crate::summary::FilterSummary> {
+        None
+    }
 }
 
 /// Which estimator a run uses.
