@@ -73,7 +73,8 @@ pub struct OdometryArgs {
     vehicle: bool,
     /// How long a radar frame that gives no velocity alone (too few points, no consensus) is kept
     /// in seconds: its points, carried forward with the IMU's motion, join the next frames'
-    /// (default 0.15, chosen on the validation and training sets, docs/odometry.md; 0: off).
+    /// (default 0: off; docs/odometry.md, "Known weaknesses": 0.15 helps this filter on the
+    /// validation sets, not the fused estimators).
     #[arg(long)]
     stack_window: Option<f64>,
 }

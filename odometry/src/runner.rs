@@ -155,9 +155,9 @@ pub struct ClassicalConfig {
     /// directions) are kept this long \[s\]: their points, each carried to a later frame with
     /// the rotation and the velocity change the IMU integrated in between, join that frame's
     /// points when it cannot decide alone either. Sparse scenes (an atrium, outdoors) then still
-    /// give velocities. Each point serves one estimate at most. Default 0.15 s (the frame
-    /// and up to three before it at 20 Hz), chosen on split v2's validation and training sets
-    /// and v1's validation set (docs/odometry.md); 0: off.
+    /// give velocities. Each point serves one estimate at most. 0 (the default): off; 0.15 s
+    /// helps the Doppler filter on the validation and training sets but makes `auto` and fused
+    /// worse on v1's validation set and on unseen seeds (docs/odometry.md).
     pub stack_window_s: f64,
 }
 
@@ -172,7 +172,7 @@ impl Default for ClassicalConfig {
             rest: RestConfig::default(),
             imu_gap_s: 0.1,
             learned: LearnedConfig::default(),
-            stack_window_s: 0.15,
+            stack_window_s: 0.0,
         }
     }
 }

@@ -555,9 +555,7 @@ fn a_walk_the_radar_hardly_sees_does_not_run_away_horizontally() {
     // Two outdoor walks of split v2's training set with MEMS IMUs where the radar (tilted up,
     // sparse scene) gives no velocity for 10-30 s at a time: the IMU alone ran them away at up
     // to 10 m/s, 94 m and 9 m of ATE. The horizontal bound
-    // (`RioConfig::horizontal_velocity_std`) keeps a lost filter at walking pace. Stacking is
-    // off here: it finds velocities in some of these frames (with it both walks end under 9 m
-    // with or without the bound), and the bound is for the stretches it cannot fill.
+    // (`RioConfig::horizontal_velocity_std`) keeps a lost filter at walking pace.
     use milliego_sim::split::{Set, SplitVersion};
     let entries = SplitVersion::V2.entries(Set::Train);
     for seed in [1102, 1100] {
@@ -569,12 +567,8 @@ fn a_walk_the_radar_hardly_sees_does_not_run_away_horizontally() {
             .expect("an outdoor walk of the training set");
         let (_dir, s) = simulated(&e.scenario());
         let path = ate(&s, Estimator::Doppler).1;
-        let on = OfflineConfig {
-            stack_window_s: 0.0,
-            ..OfflineConfig::default()
-        };
-        let r = run(&s, &on).expect("offline run");
-        let mut off = on;
+        let r = run(&s, &OfflineConfig::default()).expect("offline run");
+        let mut off = OfflineConfig::default();
         off.rio.horizontal_velocity_std = f64::INFINITY;
         let r_off = run(&s, &off).expect("offline run");
         let (a, a_off) = (ate_of(&s, &r.trajectory), ate_of(&s, &r_off.trajectory));
