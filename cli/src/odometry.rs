@@ -63,6 +63,11 @@ pub struct OdometryArgs {
     /// for a driver that stamps scans when it publishes them).
     #[arg(long, default_value = "auto", value_parser = parse_time_offset)]
     time_offset: TimeOffsetMode,
+    /// The IMU's noise preset for the filter: mti1 (Xsens MTi-1 series), mti600 (MTi-600
+    /// series) or mems (BMI088/ICM class). Default: the one the session's IMU device names,
+    /// else mti1 (docs/odometry.md, "IMU noise").
+    #[arg(long, value_name = "PRESET")]
+    imu_noise: Option<milliego_odometry::rio::ImuNoise>,
     /// A known radar latency in seconds added to every radar frame's time (positive: frames
     /// were taken later than stamped).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
@@ -118,6 +123,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
         cfg.rio.horizontal_velocity_std = if v > 0.0 { v } else { f64::INFINITY };
     }
     cfg.time_offset = a.time_offset;
+    cfg.imu_noise = a.imu_noise;
     if a.vehicle {
         cfg = cfg.ground_vehicle();
     }
@@ -139,6 +145,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
             "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "vertical_bounds": r.vertical_bounds, "horizontal_bounds": r.horizontal_bounds, "nis_mean": r.nis_mean},
             "barometer": if r.pressure_readings == 0 { json!("none in the session: height from radar and IMU only") } else if a.no_barometer { json!(format!("{} readings ignored (--no-barometer)", r.pressure_readings)) } else { json!({"readings": r.pressure_readings, "updates": r.baro_updates, "rejected": r.baro_rejected, "reanchors": r.baro_reanchors}) },
             "doppler_step": doppler_step_json(r.doppler_step, a.doppler_step.is_some()),
+            "imu_noise": r.imu_noise,
             "near_field_points": r.near_field_points,
             "ground_vehicle": if a.vehicle { json!({"applied": r.nonholonomic.0, "gated": r.nonholonomic.1}) } else { json!("not asked (--vehicle)") },
             "radar_stream": {"frames_bad": r.radar.bad, "bytes_skipped": r.radar.bytes_skipped},

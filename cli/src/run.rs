@@ -80,6 +80,11 @@ pub struct RunArgs {
     /// vertical velocity at zero within 0.1 m/s (as `odometry --vehicle`).
     #[arg(long)]
     vehicle: bool,
+    /// The IMU's noise preset for the filter: mti1 (Xsens MTi-1 series), mti600 (MTi-600
+    /// series) or mems (BMI088/ICM class). Default: the one the session's IMU device names,
+    /// else mti1 (docs/odometry.md, "IMU noise").
+    #[arg(long, value_name = "PRESET")]
+    imu_noise: Option<milliego_odometry::rio::ImuNoise>,
     /// Radar updates may correct heading (as `odometry --radar-heading`; docs/odometry.md).
     #[arg(long)]
     radar_heading: bool,
@@ -302,6 +307,7 @@ pub fn run(a: RunArgs) -> Result<()> {
     if a.vehicle {
         cfg.classical.rio.nonholonomic_std = milliego_odometry::offline::GROUND_VEHICLE_STD;
     }
+    cfg.imu_noise = a.imu_noise;
     cfg.classical.rio.radar_heading = a.radar_heading;
     if let Some(p) = &file.extrinsics.radar {
         cfg.classical.mounting.radar = place(p);

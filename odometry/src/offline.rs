@@ -5,7 +5,7 @@
 
 use crate::ego_velocity::Config as EgoConfig;
 use crate::rest::RestConfig;
-use crate::rio::RioConfig;
+use crate::rio::{ImuNoise, RioConfig};
 use crate::runner::{ClassicalConfig, FrameInput, Mounting, Runner};
 use crate::strapdown::ImuSample;
 use milliego_session::streams::{
@@ -52,6 +52,29 @@ pub struct OfflineConfig {
     /// How long a frame that gave no velocity alone is kept for the next ones \[s\]
     /// ([`ClassicalConfig::stack_window_s`]; 0: off).
     pub stack_window_s: f64,
+    /// The IMU's noise preset ([`RioConfig::with_imu_noise`]); `None`: the one the session's IMU
+    /// device names ([`ImuNoise::from_device`]), or `rio` as given when it names none.
+    pub imu_noise: Option<ImuNoise>,
+}
+
+/// The IMU noise preset for `session` when `asked` is none ([`OfflineConfig::imu_noise`]), and
+/// where it came from (for the reports).
+pub fn imu_noise_of(session: &Session, asked: Option<ImuNoise>) -> (Option<ImuNoise>, String) {
+    if let Some(n) = asked {
+        return (Some(n), format!("{}, asked for", n.name()));
+    }
+    let device = session.meta.imu.as_ref().and_then(|i| i.device.as_deref());
+    match device.map(|d| (d, ImuNoise::from_device(d))) {
+        Some((d, Some(n))) => (Some(n), format!("{}, from the IMU device {d:?}", n.name())),
+        Some((d, None)) => (
+            None,
+            format!("the defaults (mti1): no preset for the IMU device {d:?}"),
+        ),
+        None => (
+            None,
+            "the defaults (mti1): the session names no IMU device".into(),
+        ),
+    }
 }
 
 /// When the filter estimates the radar-to-IMU time offset ([`RioConfig::time_offset_std`]).
@@ -118,6 +141,7 @@ impl Default for OfflineConfig {
             radar_time_shift_s: 0.0,
             time_offset: TimeOffsetMode::Auto,
             stack_window_s: c.stack_window_s,
+            imu_noise: None,
         }
     }
 }
@@ -192,6 +216,8 @@ pub struct OfflineResult {
     /// caller's) and the one the radial velocities showed, which replaced it
     /// ([`crate::runner::Runner::doppler_step`]).
     pub doppler_step: (f32, Option<f32>),
+    /// The IMU noise the filter assumed and where it came from ([`imu_noise_of`]).
+    pub imu_noise: String,
 }
 
 /// Why a run could not start.
@@ -250,7 +276,8 @@ pub fn run_with_motions(
     // One time base for both streams (the lower-envelope clock fits of the session crate).
     let clock = SessionClock::fit(session, &frames, &imu)?;
     let (radar_clock, imu_clock, clock_unsynced) = (clock.radar, clock.imu, clock.unsynced());
-    let mut rio = cfg.rio;
+    let (noise, imu_noise) = imu_noise_of(session, cfg.imu_noise);
+    let mut rio = noise.map_or(cfg.rio, |n| cfg.rio.with_imu_noise(n));
     let offset_why = match cfg.time_offset {
         TimeOffsetMode::Off => None,
         TimeOffsetMode::Estimate(std) => {
@@ -380,5 +407,6 @@ pub fn run_with_motions(
             .map(|((o, sd), why)| (o, sd, why)),
         learned: *runner.learned_counters(),
         doppler_step: runner.doppler_step(),
+        imu_noise,
     })
 }

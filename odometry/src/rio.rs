@@ -115,6 +115,106 @@ pub struct RioConfig {
     pub nonholonomic_std: f64,
 }
 
+/// IMU noise presets for the filter's process noise, from the parts' datasheets (white noise
+/// densities inflated by 1.4 for the gyro, as the MTi-1 default is, for vibration and
+/// temperature; turn-on bias and random walks as docs/simulator.md assumes for each class).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImuNoise {
+    /// Xsens MTi-1 series (MTi-1/2/3/7/8): gyro 0.007 deg/s/sqrt(Hz), accelerometer
+    /// 120 ug/sqrt(Hz). The default.
+    Mti1,
+    /// Xsens MTi-600 series (MTi-610/620/630/670/680): accelerometer 60 ug/sqrt(Hz), turn-on
+    /// bias 30 mm/s^2.
+    Mti600,
+    /// A consumer MEMS part (Bosch BMI088, TDK ICM class): gyro 0.014 deg/s/sqrt(Hz),
+    /// accelerometer 175 ug/sqrt(Hz), zero-g offset up to 20 mg (0.1 m/s^2 at one sigma
+    /// taken), bias random walks five times the MTi-1's.
+    Mems,
+}
+
+impl ImuNoise {
+    /// Every preset.
+    pub const ALL: [ImuNoise; 3] = [ImuNoise::Mti1, ImuNoise::Mti600, ImuNoise::Mems];
+
+    /// Its name (`mti1`, `mti600`, `mems`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ImuNoise::Mti1 => "mti1",
+            ImuNoise::Mti600 => "mti600",
+            ImuNoise::Mems => "mems",
+        }
+    }
+
+    /// The preset a device name (a session's `[imu] device`, free text) calls for, when it
+    /// names a known part: `MTi-6..` is the 600 series, other `MTi-1`..`MTi-8` parts the MTi-1
+    /// series, and BMI/ICM/MPU/LSM parts or "MEMS" a consumer MEMS IMU.
+    pub fn from_device(device: &str) -> Option<ImuNoise> {
+        let d = device.to_ascii_lowercase();
+        if [
+            "bmi0", "bmi1", "bmi2", "icm-", "icm2", "mpu-", "mpu6", "mpu9", "lsm6", "mems",
+        ]
+        .iter()
+        .any(|k| d.contains(k))
+        {
+            return Some(ImuNoise::Mems);
+        }
+        let series = d.split("mti-").nth(1)?.chars().next()?;
+        match series {
+            '6' => Some(ImuNoise::Mti600),
+            '1'..='8'
+                if !d.contains("mti-10") && !d.contains("mti-20") && !d.contains("mti-30") =>
+            {
+                Some(ImuNoise::Mti1)
+            }
+            _ => None,
+        }
+    }
+}
+
+impl core::str::FromStr for ImuNoise {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        ImuNoise::ALL
+            .into_iter()
+            .find(|n| n.name() == s)
+            .ok_or_else(|| {
+                format!("unknown IMU noise preset {s:?} (expected mti1, mti600 or mems)")
+            })
+    }
+}
+
+impl RioConfig {
+    /// These settings with the IMU noise of `imu` (white noise, bias random walks and turn-on
+    /// bias uncertainty; nothing else changes).
+    pub fn with_imu_noise(mut self, imu: ImuNoise) -> Self {
+        let d = RioConfig::default();
+        (
+            self.accel_noise,
+            self.gyro_noise,
+            self.accel_bias_walk,
+            self.gyro_bias_walk,
+            self.init_accel_bias_std,
+        ) = match imu {
+            ImuNoise::Mti1 => (
+                d.accel_noise,
+                d.gyro_noise,
+                d.accel_bias_walk,
+                d.gyro_bias_walk,
+                d.init_accel_bias_std,
+            ),
+            ImuNoise::Mti600 => (
+                0.6e-3,
+                d.gyro_noise,
+                d.accel_bias_walk,
+                d.gyro_bias_walk,
+                0.03,
+            ),
+            ImuNoise::Mems => (1.72e-3, 3.4e-4, 5e-4, 1e-5, 0.1),
+        };
+        self
+    }
+}
+
 impl Default for RioConfig {
     /// MTi-1-class IMU (datasheet-level densities).
     fn default() -> Self {
@@ -984,5 +1084,54 @@ impl Rio {
         // Beyond half a second the clock mapping is broken, not offset: held at the bound.
         self.time_offset = (self.time_offset + dx[TD]).clamp(-MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S);
         self.nav.set_state(ns);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn device_names_pick_their_preset_and_only_the_noise_changes() {
+        for (device, want) in [
+            ("MTi-1 (simulated)", Some(ImuNoise::Mti1)),
+            ("MTi-3", Some(ImuNoise::Mti1)),
+            ("MTi-8 RTK", Some(ImuNoise::Mti1)),
+            ("MTi-630 (simulated)", Some(ImuNoise::Mti600)),
+            ("Xsens MTi-680G", Some(ImuNoise::Mti600)),
+            (
+                "BMI088-class MEMS IMU (simulated, MTData2 stream)",
+                Some(ImuNoise::Mems),
+            ),
+            ("TDK ICM-42688-P", Some(ImuNoise::Mems)),
+            ("MTi-100", None),
+            ("MTi-30 AHRS", None),
+            ("MTi-G-710", None),
+            ("unknown", None),
+        ] {
+            assert_eq!(ImuNoise::from_device(device), want, "{device}");
+        }
+        for n in ImuNoise::ALL {
+            assert_eq!(n.name().parse::<ImuNoise>(), Ok(n));
+        }
+        assert!("mti100".parse::<ImuNoise>().is_err());
+        let mine = RioConfig {
+            gate: 9.0,
+            baro_std_m: 0.7,
+            ..RioConfig::default()
+        };
+        assert_eq!(
+            mine.with_imu_noise(ImuNoise::Mti1),
+            mine,
+            "MTi-1 is the default"
+        );
+        let mems = mine.with_imu_noise(ImuNoise::Mems);
+        assert!(mems.gyro_noise > 1.9 * mine.gyro_noise && mems.init_accel_bias_std == 0.1);
+        assert_eq!(
+            (mems.gate, mems.baro_std_m),
+            (9.0, 0.7),
+            "nothing but the noise changes"
+        );
+        assert!(mine.with_imu_noise(ImuNoise::Mti600).accel_noise < mine.accel_noise);
     }
 }

@@ -86,6 +86,9 @@ pub struct RunConfig {
     pub classical: ClassicalConfig,
     /// Synchroniser.
     pub sync: SyncConfig,
+    /// The IMU's noise preset for the filter; `None`: the one a session's IMU device names
+    /// (`milliego_odometry::offline::imu_noise_of`), else `classical.rio` as given.
+    pub imu_noise: Option<milliego_odometry::rio::ImuNoise>,
     /// Queue capacities: radar frames, IMU samples, synchronised events, poses.
     pub queues: [usize; 4],
     /// Stop after this long \[s\].
@@ -115,6 +118,7 @@ impl Default for RunConfig {
             tum_predicted: false,
             classical: ClassicalConfig::default(),
             sync: SyncConfig::default(),
+            imu_noise: None,
             queues: [32, 512, 1024, 1024],
             duration_s: None,
             idle_exit_s: None,
@@ -230,6 +234,8 @@ struct Plan {
     built: Built,
     /// The outputs, open.
     sinks: Vec<Sink>,
+    /// The IMU noise the filter assumes and where it came from (for the summary).
+    imu_noise: String,
 }
 
 impl Plan {
@@ -237,6 +243,10 @@ impl Plan {
         let mut cfg = cfg.clone();
         let mut session = None;
         let mut radar_decoding = DecoderConfig::default();
+        let mut imu_noise = match cfg.imu_noise {
+            Some(n) => format!("{}, asked for", n.name()),
+            None => "the defaults (mti1): live devices name none".into(),
+        };
         let mut apply_cfg = |cfg: &mut RunConfig, d: &radar_driver::cfg::Derived| {
             cfg.classical.ego = cfg
                 .classical
@@ -255,6 +265,11 @@ impl Plan {
                 let s = milliego_session::Session::open(dir).map_err(session_err)?;
                 cfg.classical.mounting =
                     crate::estimator::Mounting::from_session(&s.meta.extrinsics);
+                let (noise, why) = milliego_odometry::offline::imu_noise_of(&s, cfg.imu_noise);
+                imu_noise = why;
+                if let Some(n) = noise {
+                    cfg.classical.rio = cfg.classical.rio.with_imu_noise(n);
+                }
                 if let Some(t) = s.radar_cfg().map_err(session_err)? {
                     // A session's .cfg only refines defaults (Doppler noise, frame period), so
                     // one that cannot be derived is reported and the defaults stay.
@@ -288,6 +303,9 @@ impl Plan {
                 if d.radar_data.is_none() && d.imu.is_none() && d.hub.is_none() {
                     return Err(RunError::NoSensor);
                 }
+                if let Some(n) = cfg.imu_noise {
+                    cfg.classical.rio = cfg.classical.rio.with_imu_noise(n);
+                }
                 cfg.sync.radar_enabled = d.radar_data.is_some() || d.hub.is_some();
                 cfg.sync.imu_enabled = d.imu.is_some() || d.hub.is_some();
                 cfg.sync.radar_baud = d.radar_baud;
@@ -316,6 +334,7 @@ impl Plan {
             radar_decoding,
             built,
             sinks,
+            imu_noise,
         })
     }
 }
@@ -345,6 +364,7 @@ struct InputCounters {
 pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summary, RunError> {
     let plan = Plan::derive(input, cfg)?;
     let cfg = plan.cfg;
+    let imu_noise = plan.imu_noise;
     let [qr, qi, qe, qp] = cfg.queues;
     let offline = plan.session.is_some();
     let sh = Arc::new(Shared {
@@ -463,6 +483,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         doppler_step: stage_ends.doppler_step,
         learned: stage_ends.learned,
         filter: stage_ends.filter,
+        imu_noise: &imu_noise,
         out: &out,
         radar_report: session_radar_report.as_ref(),
     };
@@ -964,6 +985,7 @@ struct RunEnds<'a> {
     doppler_step: Option<(f32, Option<f32>)>,
     learned: Option<crate::summary::LearnedSummary>,
     filter: Option<crate::summary::FilterSummary>,
+    imu_noise: &'a str,
     out: &'a OutputEnd,
     radar_report: Option<&'a StreamReport>,
 }
@@ -1078,6 +1100,7 @@ fn run_summary(e: &RunEnds<'_>, sh: &Shared, c: &InputCounters, latency: &Latenc
         view_client_dropped: 0,
         learned: e.learned.clone(),
         filter: e.filter,
+        imu_noise: e.imu_noise.into(),
     }
 }
 

@@ -27,6 +27,10 @@ pub struct RunSummary {
     /// radial velocities when they show one, else the `.cfg`'s velocity resolution.
     #[serde(default)]
     pub doppler_step: String,
+    /// The IMU noise preset the filter assumed and where it came from (the session's IMU
+    /// device, `--imu-noise`, or the defaults).
+    #[serde(default)]
+    pub imu_noise: String,
     /// What the estimator stage and the outputs produced.
     pub frames_out: FramesOut,
     /// Items dropped by every queue and buffer.

@@ -300,6 +300,38 @@ fn offline_run_follows_milliego_odometry_across_imu_gaps_and_repeats_itself() {
 
 /// `milliego run --session` (offline) gives `milliego odometry`'s poses; returns the run's
 /// summary.
+#[test]
+fn offline_run_reproduces_milliego_odometry_with_a_mems_imu() {
+    // A session whose IMU device is a MEMS part: both the runtime and the offline runner take
+    // that part's noise preset from the session (poses equal), and the summary says so.
+    let mut sc = Scenario::new(Family::Office, MotionKind::Handheld, 14);
+    sc.duration_s = 8.0;
+    sc.imu_spec = milliego_sim::imu::ImuSpec::mems();
+    let (d, s) = session_of(&sc);
+    let device = s.meta.imu.as_ref().and_then(|i| i.device.clone());
+    assert!(
+        device.as_deref().is_some_and(|d| d.contains("MEMS")),
+        "{device:?}"
+    );
+    let summary = runtime_equals_odometry(&d, &s);
+    let r = &summary.report;
+    assert!(
+        r.imu_noise.starts_with("mems, from the IMU device"),
+        "{}",
+        r.imu_noise
+    );
+    let o = run_offline(&s, &OfflineConfig::default()).unwrap();
+    assert_eq!(o.imu_noise, r.imu_noise);
+    // Asked for another preset, the offline runner takes it and the poses change.
+    let asked = OfflineConfig {
+        imu_noise: Some(milliego_odometry::rio::ImuNoise::Mti1),
+        ..OfflineConfig::default()
+    };
+    let m = run_offline(&s, &asked).unwrap();
+    assert_eq!(m.imu_noise, "mti1, asked for");
+    assert_ne!(m.trajectory, o.trajectory, "the preset reaches the filter");
+}
+
 fn runtime_equals_odometry(
     d: &tempfile::TempDir,
     s: &Session,
