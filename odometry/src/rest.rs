@@ -155,6 +155,8 @@ pub struct RestDetector {
     /// The current rest's rates of turn not yet taken, one entry per rest update: its time
     /// \[s\], rate sum, sample count and span \[s\] ([`RestConfig::rate_margin_s`]).
     held: VecDeque<(f64, Vector3<f64>, u32, f64)>,
+    /// Held rates pushed out of a full `held` before their time: taken with the next ones.
+    early: (Vector3<f64>, u32, f64),
     since: Option<f64>,
     last_update: Option<f64>,
     /// The filter refuted the last rest ([`RestDetector::refute`]): no rest until the IMU has
@@ -208,6 +210,7 @@ impl RestDetector {
             gyro_sum: Vector3::zeros(),
             gyro_n: 0,
             held: VecDeque::with_capacity(HELD_CAPACITY),
+            early: (Vector3::zeros(), 0, 0.0),
             since: None,
             last_update: None,
             refuted: false,
@@ -307,7 +310,10 @@ impl RestDetector {
             return None;
         }
         if self.held.len() == HELD_CAPACITY {
-            self.held.pop_front();
+            if let Some((_, g, k, dt)) = self.held.pop_front() {
+                let e = &mut self.early;
+                *e = (e.0 + g, e.1 + k, e.2 + dt);
+            }
         }
         self.held
             .push_back((s.t, self.gyro_sum, self.gyro_n, s.t - from));
@@ -325,7 +331,8 @@ impl RestDetector {
 
     /// The held rates up to `until` \[s\], taken: their mean \[rad/s\] and span \[s\].
     fn take_held(&mut self, until: f64) -> Option<(Vector3<f64>, f64)> {
-        let (mut sum, mut n, mut span) = (Vector3::zeros(), 0, 0.0);
+        let (mut sum, mut n, mut span) =
+            core::mem::replace(&mut self.early, (Vector3::zeros(), 0, 0.0));
         while let Some(&(t, g, k, dt)) = self.held.front() {
             if t > until {
                 break;
@@ -342,6 +349,7 @@ impl RestDetector {
         self.gyro_sum = Vector3::zeros();
         self.gyro_n = 0;
         self.held.clear();
+        self.early = (Vector3::zeros(), 0, 0.0);
     }
 
     /// The filter's velocity says the body is not at rest (a smooth cruise keeps the IMU as
@@ -692,5 +700,39 @@ mod tests {
         assert!(feed(&mut at_once, 1.0, 1.4)
             .iter()
             .all(|u| u.rate.is_some()));
+    }
+
+    #[test]
+    fn a_margin_longer_than_the_held_rates_takes_the_oldest_early_and_loses_none() {
+        // 3 s of margin against 32 held update periods (1.6 s): the oldest rates are taken as
+        // the newest push them out, none dropped.
+        let cfg = RestConfig {
+            rate_margin_s: 3.0,
+            ..RestConfig::default()
+        };
+        let mut d = RestDetector::new(cfg);
+        feed(&mut d, 0.0, 1.0);
+        d.push_radar(1.0, ZERO, 12, 20);
+        let ups = feed(&mut d, 1.0, 6.0);
+        assert!(d.resting());
+        let taken: Vec<_> = ups
+            .iter()
+            .filter_map(|u| u.rate.map(|r| (u.t, r)))
+            .collect();
+        let first = taken.first().expect("rates taken").0 - ups[0].t;
+        assert!(
+            first > 1.5 && first < 1.8,
+            "first rate {first:.2} s into the rest"
+        );
+        for (t, (mean, span)) in &taken {
+            assert!(
+                (mean - Vector3::new(0.003, -0.002, 0.001)).norm() < 1e-3,
+                "{t}"
+            );
+            assert!((span - cfg.update_period_s).abs() < 0.006, "{t}: {span}");
+        }
+        // Every update from the first taken on takes one period: none is lost.
+        let after = ups.iter().filter(|u| u.t >= taken[0].0).count();
+        assert_eq!(taken.len(), after);
     }
 }
