@@ -606,7 +606,7 @@ impl Rio {
                     self.nonholonomic();
                 }
                 Pending::Frame(_) => {
-                    self.bound_vertical(true);
+                    self.bound_velocity(true);
                     self.nonholonomic();
                 }
                 Pending::Height(_, h) => self.height_update(h),
@@ -630,7 +630,7 @@ impl Rio {
     /// ([`RioConfig::vertical_velocity_std`]) is applied at its time, as after a frame's update.
     pub fn push_frame_without_velocity(&mut self, t: f64) {
         if self.started && t <= self.nav.state().t {
-            self.bound_vertical(true);
+            self.bound_velocity(true);
             self.nonholonomic();
         } else {
             self.pending.push(Pending::Frame(t));
@@ -641,7 +641,6 @@ impl Rio {
     /// the filter is uncertain of it by more than [`RioConfig::vertical_velocity_std`],
     /// "vertical velocity 0" with that deviation.
     fn bound_vertical(&mut self, unseen: bool) {
-        self.bound_horizontal();
         let std = self.cfg.vertical_velocity_std;
         if !(std.is_finite() && std > 0.0) || !(unseen || self.p[(5, 5)] > std * std) {
             return;
@@ -650,6 +649,13 @@ impl Rio {
         h[5] = 1.0;
         self.scalar_update(&h, -self.nav.state().v.z, std * std);
         self.counters.vertical_bounds += 1;
+    }
+
+    /// The velocity bounds after a radar frame: horizontal, then vertical (`unseen`: the frame
+    /// did not see the vertical velocity).
+    fn bound_velocity(&mut self, unseen: bool) {
+        self.bound_horizontal();
+        self.bound_vertical(unseen);
     }
 
     /// Horizontal velocity bound ([`RioConfig::horizontal_velocity_std`]): each world horizontal
@@ -909,7 +915,7 @@ impl Rio {
             .into_inner();
         let c = r_wr * Matrix3::from_fn(|i, j| m.covariance[i][j]) * r_wr.transpose();
         let std = self.cfg.vertical_velocity_std;
-        self.bound_vertical(c[(2, 2)] > std * std);
+        self.bound_velocity(c[(2, 2)] > std * std);
     }
 
     fn update_gated(&mut self, m: &VelocityMeasurement, gate: bool) {
