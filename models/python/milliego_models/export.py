@@ -2,10 +2,17 @@
 
     python -m milliego_models.export --checkpoint RUN/best.pt --out model.onnx
 
+    python -m milliego_models.export --onnx OLD.onnx --out model.onnx   # the graph passes on an exported file
+
 Inputs `radar` [1,6,64,256], `imu` [1,20,6], `state` [1,4,H]; outputs `pose` [1,6], `state_out` [1,4,H].
 Uses the TorchScript exporter (dynamo=False), then folds constants and merges the explicit 'same' Pad
 nodes into Conv `pads` with our own passes (onnxruntime's offline optimizer would fuse MatMul+Add into
-Gemm), runs shape inference and checks the op set. Metadata JSON under `metadata_props["milliego"]`.
+Gemm), folds the radar input's copied channels into the first convolution (`fold_copied_inputs`: the
+previous and the current image are each fed 3 times, so the convolution reads 2 channels with summed
+weights: a third of its work, the same values), runs shape inference and checks the op set. Metadata
+JSON under `metadata_props["milliego"]` (`radar_copies_folded` names the folded convolutions).
+`--onnx` applies the passes to a file exported before them (its metadata kept) and checks that
+onnxruntime gives the same outputs on inputs with copied channels.
 """
 from __future__ import annotations
 
@@ -19,16 +26,40 @@ import onnx
 import torch
 
 from .geometry import LABEL_CONVENTION
-from .model import IMU_SHAPE, RADAR_SHAPE, MilliEgo, count_params
-from .onnx_utils import fold_constants, fold_pads_into_convs, op_problems, ort_session, set_metadata
+from .model import IMU_SHAPE, RADAR_COPIES, RADAR_SHAPE, Exported, MilliEgo, count_params
+from .onnx_utils import (fold_constants, fold_copied_inputs, fold_pads_into_convs, get_metadata, op_problems,
+                         ort_session, set_metadata)
 
 OPSET = 17
 
 
-def example_inputs(net: MilliEgo, seed: int = 0):
+def copied_radar(images: torch.Tensor) -> torch.Tensor:
+    """[B, len(RADAR_COPIES), 64, 256] -> radar input [B, 6, 64, 256], image k in every channel of group k."""
+    out = images.new_empty(images.shape[0], RADAR_SHAPE[0], *images.shape[2:])
+    for k, grp in enumerate(RADAR_COPIES):
+        out[:, list(grp)] = images[:, k:k + 1]
+    return out
+
+
+def example_inputs(net: MilliEgo, seed: int = 0, hidden: int | None = None):
+    """Seeded inputs as the runtime feeds them (copied radar channels, see model.RADAR_COPIES)."""
     g = torch.Generator().manual_seed(seed)
-    return (torch.rand(1, *RADAR_SHAPE, generator=g) - 0.1, torch.randn(1, *IMU_SHAPE, generator=g),
-            torch.randn(1, 4, net.hidden, generator=g) * 0.5)
+    images = torch.rand(1, len(RADAR_COPIES), *RADAR_SHAPE[1:], generator=g) - 0.1
+    return (copied_radar(images), torch.randn(1, *IMU_SHAPE, generator=g),
+            torch.randn(1, 4, net.hidden if hidden is None else hidden, generator=g) * 0.5)
+
+
+def clean_graph(model: onnx.ModelProto, meta: dict) -> onnx.ModelProto:
+    """The graph passes after the exporter; checks the op set and stores `meta` (plus what was folded)."""
+    model = fold_pads_into_convs(fold_constants(model))
+    folded = fold_copied_inputs(model, "radar", RADAR_COPIES)
+    model = onnx.shape_inference.infer_shapes(model, strict_mode=True)
+    bad = op_problems(model)
+    if bad:
+        raise RuntimeError(f"exported graph uses ops outside the tract set: {bad[:10]}")
+    set_metadata(model, {**meta, "radar_copies_folded": folded})
+    onnx.checker.check_model(model)
+    return model
 
 
 def make_metadata(net: MilliEgo, stateful: bool, preprocess: dict | None, norm: dict | None, trained: bool,
@@ -40,6 +71,9 @@ def make_metadata(net: MilliEgo, stateful: bool, preprocess: dict | None, norm: 
             "trained": bool(trained), "precision": precision, "params": count_params(net)}
     if val_ate_m is not None:
         meta["val_ate_m"] = float(val_ate_m)
+    if net.uncertainty:
+        meta["pose_std"] = ("output pose_std [1,6]: the predicted standard deviation of each pose component "
+                            "(m, deg), from the uncertainty head (Gaussian NLL)")
     return meta
 
 
@@ -49,35 +83,62 @@ def export_model(net: MilliEgo, out: str, meta: dict) -> float:
     args = example_inputs(net)
     with tempfile.TemporaryDirectory() as tmp:
         raw = os.path.join(tmp, "raw.onnx")
-        torch.onnx.export(net, args, raw, input_names=["radar", "imu", "state"], output_names=["pose", "state_out"],
+        outputs = ["pose", "state_out"] + (["pose_std"] if net.uncertainty else [])
+        # Without the head, the network itself (its initializers keep the parameter names; the wrapper
+        # would prefix them with "net.").
+        torch.onnx.export(Exported(net) if net.uncertainty else net, args, raw, input_names=["radar", "imu", "state"], output_names=outputs,
                           opset_version=OPSET, dynamo=False, do_constant_folding=True)
         model = onnx.load(raw)
-    model = fold_pads_into_convs(fold_constants(model))
-    model = onnx.shape_inference.infer_shapes(model, strict_mode=True)
-    bad = op_problems(model)
-    if bad:
-        raise RuntimeError(f"exported graph uses ops outside the tract set: {bad[:10]}")
-    set_metadata(model, meta)
-    onnx.checker.check_model(model)
-    onnx.save(model, out)
+    onnx.save(clean_graph(model, meta), out)
     with torch.no_grad():
-        ref = [t.numpy() for t in net(*args)]
+        ref = [t.numpy() for t in Exported(net)(*args)]
     got = ort_session(out).run(None, {"radar": args[0].numpy(), "imu": args[1].numpy(), "state": args[2].numpy()})
     return float(max(np.abs(a - b).max() for a, b in zip(ref, got)))
 
 
+def reexport(src: str, out: str) -> float:
+    """Applies the graph passes to an exported fp32 file `src` (metadata kept); returns max |out - src|
+    in onnxruntime over seeded inputs with copied radar channels."""
+    model = onnx.load(src)
+    meta = get_metadata(model)
+    if meta.get("precision", "fp32") != "fp32":
+        raise ValueError(f"{src}: precision {meta.get('precision')}; re-export the fp32 file, then quantize it")
+    if "radar_copies_folded" in meta:
+        raise ValueError(f"{src}: already folded ({meta['radar_copies_folded']})")
+    onnx.save(clean_graph(model, meta), out)
+    a, b = ort_session(src), ort_session(out)
+    diff = 0.0
+    for seed in range(4):
+        radar, imu, state = (t.numpy() for t in example_inputs(None, seed, hidden=meta["hidden"]))
+        feed = {"radar": radar, "imu": imu, "state": state}
+        diff = max(diff, max(float(np.abs(x - y).max()) for x, y in zip(a.run(None, feed), b.run(None, feed))))
+    return diff
+
+
 def load_checkpoint(path: str) -> tuple[MilliEgo, dict]:
     ck = torch.load(path, map_location="cpu", weights_only=False)
-    net = MilliEgo(ck["config"])
+    net = MilliEgo(ck["config"], ck.get("uncertainty", False))
     net.load_state_dict(ck["model"])
     return net.eval(), ck
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description="export a milliEgo checkpoint to ONNX")
-    p.add_argument("--checkpoint", required=True)
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--checkpoint", help="training checkpoint (RUN/best.pt)")
+    src.add_argument("--onnx", help="an fp32 file exported before the current graph passes")
     p.add_argument("--out", required=True)
     a = p.parse_args(argv)
+    if a.onnx:
+        try:
+            diff = reexport(a.onnx, a.out)
+        except ValueError as e:
+            print(f"export: {e}", file=sys.stderr)
+            return 2
+        meta = get_metadata(onnx.load(a.out))
+        print(f"wrote {a.out}: graph passes applied to {a.onnx} (folded {meta['radar_copies_folded']}); "
+              f"onnxruntime max abs diff {diff:.3g}")
+        return 0
     net, ck = load_checkpoint(a.checkpoint)
     meta = make_metadata(net, ck["stateful"], ck.get("preprocess"), ck.get("norm"), trained=True,
                          val_ate_m=ck.get("val_ate_m"))

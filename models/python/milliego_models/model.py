@@ -30,6 +30,10 @@ import torch.nn.functional as F
 from torch import nn
 
 RADAR_SHAPE = (6, 64, 256)
+# Channels of the radar input that carry the same image (`data.stack_pair`: the previous frame's
+# image 3 times, then the current one's 3 times, the authors' way of feeding FlowNet's 6 channels).
+# The export folds each group into one channel of the first convolution (`onnx_utils.fold_copied_inputs`).
+RADAR_COPIES = ((0, 1, 2), (3, 4, 5))
 IMU_SHAPE = (20, 6)
 # (kernel, stride) of the nine FlowNetS-like convolutions.
 CONV_GEOMETRY = ((7, 2), (5, 2), (5, 2), (3, 1), (3, 2), (3, 1), (3, 2), (3, 1), (3, 2))
@@ -112,11 +116,16 @@ class LSTMCell(nn.Module):
         return self.step(self.input(x), h, c)
 
 
+# Bounds of the predicted log-variance (uncertainty head): deviations from 3e-4 to 55 (m or deg).
+LOG_VAR_RANGE = (-16.0, 8.0)
+
+
 class MilliEgo(nn.Module):
-    def __init__(self, config: Config | str = "paper"):
+    def __init__(self, config: Config | str = "paper", uncertainty: bool = False):
         super().__init__()
         cfg = CONFIGS[config] if isinstance(config, str) else config
         self.config = cfg
+        self.uncertainty = bool(uncertainty)
         convs, pads = [], []
         c_in, (h, w) = RADAR_SHAPE[0], RADAR_SHAPE[1:]
         for c_out, (k, s) in zip(cfg.conv_channels, CONV_GEOMETRY):
@@ -151,6 +160,13 @@ class MilliEgo(nn.Module):
         h1, h2 = cfg.head_hidden
         self.trans = nn.ModuleList([Dense(cfg.fusion_hidden, h1), Dense(h1, h2), Dense(h2, 3)])
         self.rot = nn.ModuleList([Dense(cfg.fusion_hidden, h1), Dense(h1, h2), Dense(h2, 3)])
+        if self.uncertainty:
+            # Our extension (issue 19): log-variance of each pose component, read from the fusion
+            # LSTM's output with the gradient stopped, so it never changes the pose path (a model
+            # trained without it keeps its poses when the head is added and trained alone).
+            self.std_head = nn.ModuleList([Dense(cfg.fusion_hidden, h1), Dense(h1, h2), Dense(h2, 6)])
+            nn.init.zeros_(self.std_head[2].weight)
+            nn.init.zeros_(self.std_head[2].bias)
         self.dropout = nn.Dropout(cfg.dropout)
 
     @property
@@ -197,14 +213,33 @@ class MilliEgo(nn.Module):
         return self.dropout(torch.cat([zr2, zi2], dim=1))
 
     def recurrent(self, fused: torch.Tensor, state: torch.Tensor):
-        """One fusion-LSTM step and the pose heads: (pose [B,6], state_out [B,4,H])."""
+        """One fusion-LSTM step and the pose heads: (pose [B,6], state_out [B,4,H]); with the
+        uncertainty head, pose is [B,12]: the 6 components, then their log-variances."""
         h1, c1 = self.fusion1(fused, state[:, 0], state[:, 1])
         h2, c2 = self.fusion2(h1, state[:, 2], state[:, 3])
         pose = torch.cat([self._head(self.trans, h2, self.dropout), self._head(self.rot, h2, self.dropout)], dim=1)
+        if self.uncertainty:
+            x = F.relu(self.std_head[1](F.relu(self.std_head[0](h2.detach()))))
+            pose = torch.cat([pose, self.std_head[2](x).clamp(*LOG_VAR_RANGE)], dim=1)
         return pose, torch.stack([h1, c1, h2, c2], dim=1)
 
     def forward(self, radar: torch.Tensor, imu: torch.Tensor, state: torch.Tensor):
         return self.recurrent(self.features(radar, imu), state)
+
+
+class Exported(nn.Module):
+    """The exported interface: (pose [B,6], state_out [B,4,H]) plus, with the uncertainty head,
+    pose_std [B,6], the predicted standard deviation of each component (m, deg)."""
+
+    def __init__(self, net: MilliEgo):
+        super().__init__()
+        self.net = net
+
+    def forward(self, radar, imu, state):
+        pose, state_out = self.net(radar, imu, state)
+        if not self.net.uncertainty:
+            return pose, state_out
+        return pose[:, :6], state_out, torch.exp(0.5 * pose[:, 6:])
 
 
 class Unrolled(nn.Module):
@@ -232,10 +267,10 @@ def count_params(model: nn.Module) -> int:
     return sum(p.numel() for p in model.parameters())
 
 
-def build(config: str, seed: int | None = None) -> MilliEgo:
+def build(config: str, seed: int | None = None, uncertainty: bool = False) -> MilliEgo:
     if seed is not None:
         torch.manual_seed(seed)
-    return MilliEgo(config)
+    return MilliEgo(config, uncertainty)
 
 
 PAPER_PARAMS = 33_978_694  # Keras rebuild of build_model_cross_att; paper reports 33.9M

@@ -18,7 +18,7 @@ ALLOWED_OPS = frozenset({
     "Conv", "QLinearConv", "MatMul", "QLinearMatMul", "QuantizeLinear", "DequantizeLinear", "Add", "Sub",
     "Mul", "Div", "Sigmoid", "Tanh", "Relu", "LeakyRelu", "Concat", "Reshape", "Transpose", "ReduceMean",
     "GlobalAveragePool", "Slice", "Gather", "Split", "Squeeze", "Unsqueeze", "Flatten", "Pad", "Constant",
-    "Identity", "Shape", "Clip",
+    "Identity", "Shape", "Clip", "Exp",
 })
 
 
@@ -88,6 +88,43 @@ def fold_pads_into_convs(model: onnx.ModelProto) -> onnx.ModelProto:
     del g.initializer[:]
     g.initializer.extend(live)
     return model
+
+
+def fold_copied_inputs(model: onnx.ModelProto, input_name: str, groups) -> list[str]:
+    """Folds, in place, the channels of graph input `input_name` that always carry the same values
+    (`groups`: tuples of channel indices, e.g. `model.RADAR_COPIES`) in every Conv that reads the input
+    directly: the Conv's weights for a group are summed into one input channel and the Conv reads one
+    channel per group through a `Gather` (axis 1). For inputs whose groups hold copies the outputs are
+    the same up to float rounding (sum of products regrouped), at 1/len(group) of the multiply-adds and
+    im2col bytes. Convs with groups != 1 or non-constant weights are left. Returns the folded Convs' names."""
+    g = model.graph
+    inits = {i.name: i for i in g.initializer}
+    channels = [c for grp in groups for c in grp]
+    if sorted(channels) != list(range(len(channels))) or any(len(grp) == 0 for grp in groups):
+        raise ValueError(f"channel groups {groups} must partition 0..{len(channels) - 1}")
+
+    def group_attr(node):
+        return next((helper.get_attribute_value(a) for a in node.attribute if a.name == "group"), 1)
+
+    convs = [n for n in g.node if n.op_type == "Conv" and n.input and n.input[0] == input_name
+             and len(n.input) > 1 and n.input[1] in inits and group_attr(n) == 1]
+    if not convs:
+        return []
+    picked = f"{input_name}_folded_copies"
+    index = f"{picked}_index"
+    g.initializer.append(numpy_helper.from_array(np.array([grp[0] for grp in groups], np.int64), index))
+    first = min(list(g.node).index(c) for c in convs)
+    g.node.insert(first, helper.make_node("Gather", [input_name, index], [picked], axis=1,
+                                          name=f"/{picked}/Gather"))
+    for conv in convs:
+        w = numpy_helper.to_array(inits[conv.input[1]])
+        if w.shape[1] != len(channels):
+            raise ValueError(f"{conv.name}: weight {w.shape} does not read {len(channels)} channels")
+        folded = np.stack([w[:, list(grp)].sum(1) for grp in groups], 1).astype(w.dtype)
+        inits[conv.input[1]].CopyFrom(numpy_helper.from_array(folded, conv.input[1]))
+        conv.input[0] = picked
+    del g.value_info[:]  # stale channel counts; re-inferred by whoever loads the graph
+    return [c.name for c in convs]
 
 
 def op_problems(model: onnx.ModelProto) -> list[str]:

@@ -7,8 +7,10 @@ import torch
 
 from conftest import PYTHON, subprocess_env
 from milliego_models.data import load_dataset
-from milliego_models.export import example_inputs, load_checkpoint
-from milliego_models.onnx_utils import ALLOWED_OPS, get_metadata, nonzero_zero_points, ort_session
+from milliego_models.export import OPSET, example_inputs, load_checkpoint, make_metadata
+from milliego_models.model import RADAR_COPIES
+from milliego_models.onnx_utils import (ALLOWED_OPS, fold_constants, fold_copied_inputs, fold_pads_into_convs,
+                                        get_metadata, nonzero_zero_points, ort_session, set_metadata)
 
 
 def run(*args):
@@ -38,6 +40,11 @@ def test_export_quantize_golden_roundtrip(stateful_run, datasets, tmp_path):
     assert meta["stateful"] is True and meta["trained"] is True and meta["precision"] == "fp32"
     assert meta["hidden"] == H and meta["config"] == "tiny" and meta["preprocess"]["gap"] == 5
     assert "norm" in meta and "label" in meta and meta["params"] > 0
+    # The copied radar channels are folded: the first convolution reads one channel per copy group.
+    assert meta["radar_copies_folded"] == ["/convs.0/Conv"]
+    conv0 = next(n for n in model.graph.node if n.name == "/convs.0/Conv")
+    w0 = next(i for i in model.graph.initializer if i.name == conv0.input[1])
+    assert conv0.input[0] == "radar_folded_copies" and list(w0.dims[:2]) == [net.convs[0].out_channels, 2]
 
     # fp32 ONNX == PyTorch on a real window with a non-zero state.
     d = load_dataset(datasets[1])
@@ -106,3 +113,77 @@ def test_paper_graph_tiny_untrained(tmp_path):
     assert "UNTRAINED (random, seed 5)" in out and "seeded random inputs" in out
     meta = get_metadata(onnx.load(tmp_path / "milliego-tiny-int8.onnx"))
     assert meta["trained"] is False and meta["precision"] == "int8"
+
+
+def conv_graph(group: int = 1) -> onnx.ModelProto:
+    """x [1,6,9,11] -> Conv 3x3 stride 2 (4 output channels) -> Relu, plus a second reader of x."""
+    from onnx import TensorProto, helper, numpy_helper
+    rng = np.random.default_rng(3)
+    w = rng.normal(size=(4, 6 // group, 3, 3)).astype(np.float32)
+    b = rng.normal(size=4).astype(np.float32)
+    nodes = [helper.make_node("Conv", ["x", "w", "b"], ["c"], kernel_shape=[3, 3], strides=[2, 2],
+                              pads=[1, 1, 1, 1], group=group, name="conv"),
+             helper.make_node("Relu", ["c"], ["y"]),
+             helper.make_node("ReduceMean", ["x"], ["m"], keepdims=0)]
+    g = helper.make_graph(nodes, "g", [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 6, 9, 11])],
+                          [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, 4, 5, 6]),
+                           helper.make_tensor_value_info("m", TensorProto.FLOAT, [])],
+                          [numpy_helper.from_array(w, "w"), numpy_helper.from_array(b, "b")])
+    return helper.make_model(g, opset_imports=[helper.make_opsetid("", OPSET)])
+
+
+def run_graph(model: onnx.ModelProto, x: np.ndarray) -> list[np.ndarray]:
+    import onnxruntime as ort
+    return ort.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"]).run(None, {"x": x})
+
+
+def test_fold_copied_inputs_same_values_on_copies_only():
+    rng = np.random.default_rng(0)
+    images = rng.normal(size=(1, 2, 9, 11)).astype(np.float32)
+    copies = np.concatenate([np.repeat(images[:, :1], 3, 1), np.repeat(images[:, 1:], 3, 1)], 1)
+    model = conv_graph()
+    before = run_graph(model, copies)
+    assert fold_copied_inputs(model, "x", RADAR_COPIES) == ["conv"]
+    onnx.checker.check_model(model)
+    w = onnx.numpy_helper.to_array(next(i for i in model.graph.initializer if i.name == "w"))
+    assert w.shape == (4, 2, 3, 3)
+    after = run_graph(model, copies)
+    for a, b in zip(before, after):
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-5)
+    # Only valid for copies: independent channels give other values (the pass trusts the interface).
+    other = rng.normal(size=(1, 6, 9, 11)).astype(np.float32)
+    assert np.abs(run_graph(conv_graph(), other)[0] - run_graph(model, other)[0]).max() > 0.1
+    # Grouped convolutions are left alone; groups must partition the channels.
+    grouped = conv_graph(group=2)
+    assert fold_copied_inputs(grouped, "x", RADAR_COPIES) == []
+    assert not any(n.op_type == "Gather" for n in grouped.graph.node)
+    try:
+        fold_copied_inputs(conv_graph(), "x", ((0, 1), (3, 4, 5)))
+        raise AssertionError("a grouping that leaves channel 2 out was accepted")
+    except ValueError as e:
+        assert "partition" in str(e)
+
+
+def test_reexport_folds_an_older_file(stateful_run, tmp_path):
+    """`export --onnx` applies the graph passes to a file exported without the fold, same outputs."""
+    net, ck = load_checkpoint(str(stateful_run / "best.pt"))
+    old, new = tmp_path / "old.onnx", tmp_path / "new.onnx"
+    args = example_inputs(net)
+    torch.onnx.export(net, args, str(old), input_names=["radar", "imu", "state"],
+                      output_names=["pose", "state_out"], opset_version=OPSET, dynamo=False)
+    model = fold_pads_into_convs(fold_constants(onnx.load(old)))
+    set_metadata(model, make_metadata(net, True, ck.get("preprocess"), ck.get("norm"), trained=True))
+    onnx.save(model, old)
+    out = run("milliego_models.export", "--onnx", old, "--out", new)
+    assert "folded ['/convs.0/Conv']" in out
+    diff = float(out.rsplit("max abs diff", 1)[1])
+    assert diff < 1e-4, out
+    meta = get_metadata(onnx.load(new))
+    assert meta["radar_copies_folded"] == ["/convs.0/Conv"] and meta["config"] == "tiny"
+    feed = {"radar": args[0].numpy(), "imu": args[1].numpy(), "state": args[2].numpy()}
+    for a, b in zip(ort_session(str(old)).run(None, feed), ort_session(str(new)).run(None, feed)):
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-4)
+    # A folded file is refused with the reason, not folded twice.
+    r = subprocess.run([PYTHON, "-m", "milliego_models.export", "--onnx", str(new), "--out", str(tmp_path / "x.onnx")],
+                       env=subprocess_env(), capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "already folded" in r.stderr, r.stderr
