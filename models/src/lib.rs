@@ -7,7 +7,9 @@
 //! `[tx, ty, tz [m], roll, pitch, yaw [deg]]` (conventions: `milliego_preprocess::pose`).
 //!
 //! A stateless model (as the authors released it) is fed a zero state every call; a stateful one
-//! carries its state from window to window until [`Model::reset`].
+//! carries its state from window to window until [`Model::reset`]. A model exported with the
+//! uncertainty head has a third output, `pose_std`: the predicted standard deviation of each pose
+//! component (m, deg), read after each step with [`Model::pose_std`].
 #![forbid(unsafe_code)]
 
 pub mod chain;
@@ -23,6 +25,9 @@ use tract_onnx::prelude::*;
 pub const INPUTS: [&str; 3] = ["radar", "imu", "state"];
 /// Model output names.
 pub const OUTPUTS: [&str; 2] = ["pose", "state_out"];
+/// The optional third output of a model with the uncertainty head: 1 x 6, the predicted standard
+/// deviation of each pose component (\[m\] for translation, \[deg\] for rotation).
+pub const STD_OUTPUT: &str = "pose_std";
 /// Rows of the LSTM state: h1, c1, h2, c2 of the two fusion layers.
 pub const STATE_ROWS: usize = 4;
 
@@ -123,6 +128,10 @@ pub struct Model {
     prepared: milliego_accel::Prepared,
     /// Radar input zeroed (the ablation `milliego score` reports).
     radar_zeroed: bool,
+    /// The graph has the `pose_std` output.
+    uncertainty: bool,
+    /// The last step's `pose_std`.
+    pose_std: Option<[f32; 6]>,
 }
 
 /// The values of an f32 tensor, in order.
@@ -223,6 +232,18 @@ impl Model {
         if names != INPUTS {
             return Err(iface(format!("inputs {names:?}, expected {INPUTS:?}")));
         }
+        let outputs: Vec<&str> = proto
+            .graph
+            .as_ref()
+            .map(|g| g.output.iter().map(|o| o.name.as_str()).collect())
+            .unwrap_or_default();
+        let uncertainty = match outputs.as_slice() {
+            [a, b] if [*a, *b] == OUTPUTS => false,
+            [a, b, c] if [*a, *b] == OUTPUTS && *c == STD_OUTPUT => true,
+            _ => return Err(iface(format!(
+                "outputs {outputs:?}, expected {OUTPUTS:?}, optionally followed by {STD_OUTPUT:?}"
+            ))),
+        };
         let h = meta.hidden;
         let mut model = onnx.model_for_proto_model(&proto).map_err(load_err)?;
         let shapes: [&[usize]; 3] = [&[1, 6, 64, 256], &[1, IMU_LEN, 6], &[1, STATE_ROWS, h]];
@@ -253,9 +274,13 @@ impl Model {
                     .unwrap_or_default()
             })
             .collect();
-        if out_shapes != [vec![1, 6], vec![1, STATE_ROWS, h]] {
+        let mut want = vec![vec![1, 6], vec![1, STATE_ROWS, h]];
+        if uncertainty {
+            want.push(vec![1, 6]);
+        }
+        if out_shapes != want {
             return Err(iface(format!(
-                "outputs {out_shapes:?}, expected [[1, 6], [1, {STATE_ROWS}, {h}]] (pose, state_out)"
+                "output shapes {out_shapes:?}, expected {want:?} ({outputs:?})"
             )));
         }
         let plan = if threads > 1 {
@@ -279,6 +304,8 @@ impl Model {
             radar_zeroed: false,
             steps: 0,
             prepared,
+            uncertainty,
+            pose_std: None,
         })
     }
 
@@ -311,6 +338,18 @@ impl Model {
     /// Forgets the LSTM state (after a gap in the windows, a sensor restart).
     pub fn reset(&mut self) {
         self.state = self.zero_state.clone();
+        self.pose_std = None;
+    }
+
+    /// True when the graph predicts its own uncertainty (the `pose_std` output).
+    pub fn has_uncertainty(&self) -> bool {
+        self.uncertainty
+    }
+
+    /// The last step's predicted standard deviation of each pose component `[tx, ty, tz [m],
+    /// roll, pitch, yaw [deg]]`; `None` for a model without the uncertainty head or before a step.
+    pub fn pose_std(&self) -> Option<[f32; 6]> {
+        self.pose_std
     }
 
     /// Feeds zeros instead of the radar images from now on (`true`): the ablation that shows
@@ -348,10 +387,11 @@ impl Model {
         } else {
             self.zero_state.clone()
         };
-        let (pose, state_out) = self.run_raw(radar, imu, state)?;
+        let (pose, state_out, std) = self.run_raw_with_std(radar, imu, state)?;
         if self.meta.stateful {
             self.state = state_out;
         }
+        self.pose_std = std;
         self.steps += 1;
         Ok(pose)
     }
@@ -384,8 +424,37 @@ impl Model {
         imu: Tensor,
         state: Tensor,
     ) -> Result<([f32; 6], Tensor), ModelError> {
+        self.run_raw_with_std(radar, imu, state)
+            .map(|(pose, state_out, _)| (pose, state_out))
+    }
+
+    /// [`Model::run_raw`], with the predicted deviation when the graph has the `pose_std` output
+    /// (checked positive and finite).
+    #[allow(clippy::type_complexity)]
+    pub fn run_raw_with_std(
+        &mut self,
+        radar: Tensor,
+        imu: Tensor,
+        state: Tensor,
+    ) -> Result<([f32; 6], Tensor, Option<[f32; 6]>), ModelError> {
         let result = self.exec.run(tvec![radar.into(), imu.into(), state.into()]);
         let mut out = result.map_err(|e| self.run_err(format!("{e:#}")))?;
+        let std = if self.uncertainty {
+            let t = out
+                .pop()
+                .ok_or_else(|| self.run_err("no pose_std output".into()))?;
+            let v = floats(&t.into_tensor()).map_err(|e| self.run_err(e))?;
+            let std: [f32; 6] = v
+                .as_slice()
+                .try_into()
+                .map_err(|_| self.run_err(format!("pose_std has {} values", v.len())))?;
+            if !std.iter().all(|s| s.is_finite() && *s > 0.0) {
+                return Err(self.run_err(format!("pose_std {std:?} is not positive and finite")));
+            }
+            Some(std)
+        } else {
+            None
+        };
         let state_out = out
             .pop()
             .ok_or_else(|| self.run_err("no state output".into()))?;
@@ -401,6 +470,6 @@ impl Model {
         if !pose.iter().all(|v| v.is_finite()) {
             return Err(self.run_err(format!("non-finite pose {pose:?}")));
         }
-        Ok((pose, state_out.into_tensor()))
+        Ok((pose, state_out.into_tensor(), std))
     }
 }

@@ -107,7 +107,19 @@ fn tract_matches_onnxruntime_on_the_golden_windows() {
             let radar_t = m.tensor(&[1, 6, 64, 256], &radar).unwrap();
             let imu_t = m.tensor(&[1, IMU_LEN, 6], imu.as_flattened()).unwrap();
             let state_t = Tensor::from_shape(&[1, 4, h], &state).unwrap();
-            let (pose, state_out) = m.run_raw(radar_t, imu_t, state_t).unwrap();
+            let (pose, state_out, std) = m.run_raw_with_std(radar_t, imu_t, state_t).unwrap();
+            // The uncertainty head: in the bundle exactly when the model has it, and equal.
+            let std_key = format!("pose_std_{key}_{k}");
+            let has_std = st.names().iter().any(|n| **n == std_key);
+            assert_eq!(std.is_some(), has_std, "{file}: pose_std output vs bundle");
+            if let Some(std) = std {
+                let want = f32s(&st, &std_key);
+                let d = max_abs(&std, &want);
+                assert!(
+                    d <= tol * 5.0,
+                    "{file} window {k}: pose_std {std:?} vs onnxruntime {want:?}"
+                );
+            }
             let want = f32s(&st, &format!("pose_{key}_{k}"));
             let d = max_abs(&pose, &want);
             worst = worst.max(d);

@@ -5,7 +5,8 @@
 
 Takes N consecutive windows of one chain (the longest, or `--chain`) and writes, for k = 0..N-1 (f32):
 `radar_k` [1,6,64,256], `imu_k` [1,20,6], `state_k` [1,4,H], `pose_fp32_k`, `state_out_fp32_k`,
-`pose_int8_k`, `state_out_int8_k`, plus `window_pair` i64 [N,2] (frame indices within the session).
+`pose_int8_k`, `state_out_int8_k` (and `pose_std_fp32_k`, `pose_std_int8_k` for a model with the
+uncertainty head), plus `window_pair` i64 [N,2] (frame indices within the session).
 State: `state_0` is zeros; for a stateful model `state_k` = `state_out_fp32_{k-1}` (the fp32 chain), and
 BOTH models are run on that same `state_k`, so each step is an independent check; a stateless model gets
 zeros every step. The safetensors metadata repeats this and the ONNX metadata.
@@ -29,6 +30,7 @@ def golden(fp32: str, int8: str, data, windows: int, chain: int | None = None) -
     if len(c) < windows:
         raise ValueError(f"longest chain has {len(c)} windows < {windows}")
     f32, i8 = ort_session(fp32), ort_session(int8)
+    names = ["pose", "state_out"] + (["pose_std"] if "pose_std" in {o.name for o in f32.get_outputs()} else [])
     state = np.zeros((1, 4, meta["hidden"]), np.float32)
     out: dict[str, np.ndarray] = {}
     offset = np.cumsum([0] + [len(s.frames) for s in data.sessions])[data.session_of[c[0]]]
@@ -36,8 +38,10 @@ def golden(fp32: str, int8: str, data, windows: int, chain: int | None = None) -
     golden.session = data.sessions[data.session_of[c[0]]].name
     for k, w in enumerate(c):
         feed = {"radar": data.radar([w]).astype(np.float32), "imu": data.imu[[w]].astype(np.float32), "state": state}
-        pose, state_out = f32.run(["pose", "state_out"], feed)
-        pose8, state_out8 = i8.run(["pose", "state_out"], feed)
+        pose, state_out, *std = f32.run(names, feed)
+        pose8, state_out8, *std8 = i8.run(names, feed)
+        if std:
+            out |= {f"pose_std_fp32_{k}": std[0], f"pose_std_int8_{k}": std8[0]}
         p = data.pair[w]
         out |= {f"panorama_prev_{k}": data.frames[p[0]][None].astype(np.float32),
                 f"panorama_cur_{k}": data.frames[p[1]][None].astype(np.float32)}

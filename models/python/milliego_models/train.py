@@ -15,6 +15,12 @@ the paper fine-tunes from frozen FlowNet weights over 200 epochs, we train every
 few CPU epochs, where Adam's per-parameter step sizes converge far faster. `--optimizer rmsprop` restores
 the paper's choice.
 
+Uncertainty (`--uncertainty`, our extension for issue 19): a third head predicts the log-variance of each
+pose component from the fusion LSTM's output with the gradient stopped, trained by the Gaussian negative
+log-likelihood of the (detached) errors, so the poses are trained exactly as without it. `--init-onnx
+model.onnx --train-only std` adds the head to an exported model and trains the head alone (the trunk
+frozen, in eval mode: the features it sees are the ones inference computes). Exported as `pose_std`.
+
 Modes: `stateless` trains on random single windows with zero LSTM state (the released model's behaviour);
 `stateful` trains on L = `--seq-len` consecutive windows of one chain from zero state with
 backpropagation through the L steps (truncated BPTT), so the model learns to use the carried state.
@@ -62,7 +68,16 @@ def parse_args(argv=None):
     p.add_argument("--max-val-windows", type=int, default=None)
     p.add_argument("--time-budget-min", type=float, default=None, help="stop after the epoch that exceeds this")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads per rank")
-    return p.parse_args(argv)
+    p.add_argument("--uncertainty", action="store_true",
+                   help="add the uncertainty head (predicted log-variance per pose component, Gaussian NLL)")
+    p.add_argument("--init-onnx", default=None,
+                   help="initialise from an exported fp32 model (its weights and image normalisation)")
+    p.add_argument("--train-only", default="all", choices=["all", "std"],
+                   help="std: train only the uncertainty head (needs --uncertainty; the rest frozen)")
+    a = p.parse_args(argv)
+    if a.train_only == "std" and not a.uncertainty:
+        p.error("--train-only std needs --uncertainty")
+    return a
 
 
 def setup_distributed():
@@ -107,9 +122,53 @@ def auto_gamma(label: np.ndarray) -> float:
 
 
 def pose_loss(pred: torch.Tensor, target: torch.Tensor, gamma: float):
+    """MSE(translation [m]) + gamma * MSE(rotation [deg]) of the first 6 columns of `pred`."""
     t = F.mse_loss(pred[..., :3], target[..., :3])
-    r = F.mse_loss(pred[..., 3:], target[..., 3:])
+    r = F.mse_loss(pred[..., 3:6], target[..., 3:6])
     return t + gamma * r, t, r
+
+
+def nll_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Gaussian negative log-likelihood (constant dropped, mean over components) of the errors of the
+    pose columns `pred[..., :6]`, detached, under the predicted log-variances `pred[..., 6:12]`."""
+    err2 = (pred[..., :6].detach() - target) ** 2
+    log_var = pred[..., 6:12]
+    return 0.5 * (log_var + err2 * torch.exp(-log_var)).mean()
+
+
+def load_onnx_weights(net: MilliEgo, path: str) -> dict:
+    """Copies an exported fp32 model's weights into `net` (initializer names = parameter names; a first
+    convolution folded over the radar copies is spread back over them, the same function on copied
+    inputs). Returns the file's metadata. Every parameter except the uncertainty head must be found."""
+    import onnx
+    from onnx import numpy_helper
+
+    from .model import RADAR_COPIES
+    from .onnx_utils import get_metadata
+    model = onnx.load(path)
+    meta = get_metadata(model)
+    if meta.get("precision", "fp32") != "fp32":
+        raise ValueError(f"{path}: precision {meta.get('precision')}; initialise from the fp32 file")
+    if meta["config"] != net.config.name:
+        raise ValueError(f"{path}: config {meta['config']!r}, training {net.config.name!r}")
+    inits = {i.name.removeprefix("net."): numpy_helper.to_array(i) for i in model.graph.initializer}
+    state = net.state_dict()
+    missing = []
+    for name, value in state.items():
+        if name not in inits:
+            if not name.startswith("std_head."):
+                missing.append(name)
+            continue
+        w = inits[name]
+        if tuple(w.shape) != tuple(value.shape) and name == "convs.0.weight" and meta.get("radar_copies_folded"):
+            w = np.concatenate([np.repeat(w[:, k:k + 1], len(g), 1) / len(g) for k, g in enumerate(RADAR_COPIES)], 1)
+        if tuple(w.shape) != tuple(value.shape):
+            raise ValueError(f"{path}: {name} has shape {w.shape}, the network {tuple(value.shape)}")
+        state[name] = torch.from_numpy(np.ascontiguousarray(w, dtype=np.float32))
+    if missing:
+        raise ValueError(f"{path}: no weights for {missing[:5]} ({len(missing)} parameters)")
+    net.load_state_dict(state)
+    return meta
 
 
 @torch.no_grad()
@@ -143,14 +202,36 @@ def evaluate(net, data: WindowData, stateful: bool, device, gamma: float) -> dic
     losses = []
     for c, p in zip(data.chains, preds):
         frames = np.concatenate([[data.pair[c[0], 0]], data.pair[c, 1]])
-        est = compose(pose_to_matrix(data.gt_pose[frames[0]]), p)[:, :3, 3]
+        est = compose(pose_to_matrix(data.gt_pose[frames[0]]), p[:, :6])[:, :3, 3]
         errs.setdefault(int(data.session_of[c[0]]), []).append(aligned_errors(est, data.gt_pose[frames, :3]))
         losses.append([x.item() * len(c) for x in pose_loss(torch.from_numpy(p), torch.from_numpy(data.label[c]), gamma)])
     per = [np.concatenate(v) for v in errs.values()]
     loss, trans, rot = np.sum(losses, axis=0) / max(1, sum(len(c) for c in data.chains))
-    return {"val_loss": float(loss), "val_trans_mse": float(trans), "val_rot_mse_deg2": float(rot),
-            "val_ate_rmse_m": float(np.mean([np.sqrt(np.mean(e ** 2)) for e in per])),
-            "val_ate_mean_m": float(np.mean([e.mean() for e in per]))}
+    out = {"val_loss": float(loss), "val_trans_mse": float(trans), "val_rot_mse_deg2": float(rot),
+           "val_ate_rmse_m": float(np.mean([np.sqrt(np.mean(e ** 2)) for e in per])),
+           "val_ate_mean_m": float(np.mean([e.mean() for e in per]))}
+    if net.uncertainty:
+        out.update(uncertainty_metrics(np.concatenate(preds), data.label[np.concatenate(data.chains)]))
+    return out
+
+
+def uncertainty_metrics(pred: np.ndarray, label: np.ndarray) -> dict:
+    """How well the predicted deviations fit the errors: the NLL, the mean squared normalised error of
+    translation and rotation (1 when calibrated), and the rank correlation between the predicted
+    translation deviation and the translation error's size (0: the head says nothing)."""
+    err = pred[:, :6] - label
+    var = np.exp(pred[:, 6:12])
+    z2 = err ** 2 / var
+    t_err = np.linalg.norm(err[:, :3], axis=1)
+    t_std = np.sqrt(var[:, :3].sum(1))
+
+    def ranks(x):
+        r = np.empty(len(x))
+        r[np.argsort(x)] = np.arange(len(x))
+        return r
+    rho = float(np.corrcoef(ranks(t_err), ranks(t_std))[0, 1]) if len(t_err) > 2 and t_std.std() > 0 else 0.0
+    return {"val_nll": float(0.5 * (np.log(var) + z2).mean()), "val_z2_trans": float(z2[:, :3].mean()),
+            "val_z2_rot": float(z2[:, 3:].mean()), "val_std_err_rank_corr": rho}
 
 
 def batches(data: WindowData, args, rank, world, epoch):
@@ -201,10 +282,23 @@ def main(argv=None) -> int:
         f"world {world}, device {device}, gamma {gamma:.4g}")
 
     seed_all(args.seed)
-    net = MilliEgo(args.config).to(device)
-    log(f"config {args.config}: {count_params(net):,} parameters, mode {args.mode}")
-    opt = (torch.optim.Adam(net.parameters(), lr=args.lr) if args.optimizer == "adam"
-           else torch.optim.RMSprop(net.parameters(), lr=args.lr))
+    net = MilliEgo(args.config, args.uncertainty).to(device)
+    if args.init_onnx:
+        init_meta = load_onnx_weights(net, args.init_onnx)
+        if init_meta.get("norm"):
+            # The weights were trained on images through that normalisation: keep it.
+            train.norm = val.norm = init_meta["norm"]
+        log(f"initialised from {args.init_onnx} (its normalisation {train.norm})")
+    if args.train_only == "std":
+        for name, prm in net.named_parameters():
+            prm.requires_grad_(name.startswith("std_head."))
+    trainable = [prm for prm in net.parameters() if prm.requires_grad]
+    clip_groups = [g for g in ([prm for n, prm in net.named_parameters() if prm.requires_grad and not n.startswith("std_head.")],
+                               [prm for n, prm in net.named_parameters() if prm.requires_grad and n.startswith("std_head.")]) if g]
+    log(f"config {args.config}: {count_params(net):,} parameters ({sum(p.numel() for p in trainable):,} trained), "
+        f"mode {args.mode}, uncertainty {args.uncertainty}")
+    opt = (torch.optim.Adam(trainable, lr=args.lr) if args.optimizer == "adam"
+           else torch.optim.RMSprop(trainable, lr=args.lr))
     sched = torch.optim.lr_scheduler.StepLR(opt, step_size=args.lr_step, gamma=0.75)
     start_epoch, best, bad = 0, float("inf"), 0
     if args.resume:
@@ -227,8 +321,9 @@ def main(argv=None) -> int:
         if stop:
             break
         t0 = time.time()
-        model.train()
-        sums, seen = np.zeros(3), 0
+        # Head-only training keeps the trunk in eval mode (no dropout): the features inference sees.
+        model.train(args.train_only == "all")
+        sums, seen = np.zeros(4), 0
         bar = tqdm(batches(train, args, rank, world, epoch), total=n_batches(train, args, world),
                    desc=f"epoch {epoch + 1}/{args.epochs}", disable=rank != 0, mininterval=5, file=sys.stdout)
         for ids in bar:
@@ -239,12 +334,19 @@ def main(argv=None) -> int:
             label = b["label"].to(device).view(B, L, 6)
             pred, _ = model(radar, imu, net.zero_state(B, device))
             loss, lt, lr_ = pose_loss(pred, label, gamma)
+            nll = nll_loss(pred, label) if net.uncertainty else torch.zeros(())
+            if args.train_only == "std":
+                loss = nll
+            elif net.uncertainty:
+                loss = loss + nll
             opt.zero_grad(set_to_none=True)
             loss.backward()
             if args.clip > 0:
-                torch.nn.utils.clip_grad_norm_(model.parameters(), args.clip)
+                # The pose path and the uncertainty head clipped apart: the head never changes the poses.
+                for group in clip_groups:
+                    torch.nn.utils.clip_grad_norm_(group, args.clip)
             opt.step()
-            sums += np.array([loss.item(), lt.item(), lr_.item()]) * B * L
+            sums += np.array([loss.item(), lt.item(), lr_.item(), nll.item()]) * B * L
             seen += B * L
             bar.set_postfix(loss=f"{sums[0] / seen:.4g}")
         sched.step()
@@ -253,10 +355,13 @@ def main(argv=None) -> int:
         decision = [False, False]
         if rank == 0:
             m = evaluate(net, val, stateful, device, gamma)
-            improved = m["val_ate_rmse_m"] < best
-            best, bad = (m["val_ate_rmse_m"], 0) if improved else (best, bad + 1)
+            # The best checkpoint: by validation ATE, or by validation NLL when only the head trains.
+            key = "val_nll" if args.train_only == "std" else "val_ate_rmse_m"
+            improved = m[key] < best
+            best, bad = (m[key], 0) if improved else (best, bad + 1)
             rec = {"epoch": epoch + 1, "train_loss": sums[0] / max(seen, 1), "train_trans_mse": sums[1] / max(seen, 1),
-                   "train_rot_mse_deg2": sums[2] / max(seen, 1), **m, "best_val_ate_rmse_m": best,
+                   "train_rot_mse_deg2": sums[2] / max(seen, 1),
+                   **({"train_nll": sums[3] / max(seen, 1)} if net.uncertainty else {}), **m, f"best_{key}": best,
                    "lr": opt.param_groups[0]["lr"], "gamma": gamma, "train_seconds": train_s,
                    "windows_per_s": seen * world / max(train_s, 1e-9), "world": world}
             with open(out / "metrics.jsonl", "a") as f:
@@ -265,6 +370,7 @@ def main(argv=None) -> int:
             ck = {"model": net.state_dict(), "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
                   "epoch": epoch + 1, "best": best, "bad_epochs": bad, "gamma": gamma, "rng": [rng_states()],
                   "config": args.config, "stateful": stateful, "hidden": net.hidden, "args": vars(args),
+                  "uncertainty": net.uncertainty,
                   "preprocess": train.preprocess, "norm": train.norm, "val_ate_m": m["val_ate_rmse_m"],
                   "params": count_params(net)}
             save(out / "last.pt", ck)
@@ -273,7 +379,7 @@ def main(argv=None) -> int:
             over_budget = args.time_budget_min is not None and time.time() - started > 60 * args.time_budget_min
             decision = [bad >= args.patience, over_budget]
             if decision[0]:
-                log(f"early stop: no val ATE improvement in {args.patience} epochs (best {best:.4g} m)")
+                log(f"early stop: no {key} improvement in {args.patience} epochs (best {best:.4g})")
             if decision[1]:
                 log(f"time budget {args.time_budget_min} min exceeded: stopping after epoch {epoch + 1}")
         if world > 1:
