@@ -64,6 +64,10 @@ pub struct ScoreArgs {
     /// The learned measurements' deviation per metre moved (default: the shipped setting).
     #[arg(long, value_name = "K")]
     learned_scale_std: Option<f64>,
+    /// Weight of a model's own predicted deviation (uncertainty head) in the learned
+    /// measurements' deviation (default: the shipped setting; 0: not used)
+    #[arg(long, value_name = "W")]
+    learned_predicted_std: Option<f64>,
     /// `auto`'s online check: the largest mean NIS over its window (default: the shipped
     /// setting).
     #[arg(long, value_name = "X")]
@@ -213,6 +217,9 @@ pub fn run(a: ScoreArgs) -> Result<()> {
     }
     if let Some(k) = a.learned_scale_std {
         learned.scale_std = k;
+    }
+    if let Some(w) = a.learned_predicted_std {
+        learned.predicted_std = w;
     }
     if let Some(x) = a.learned_nis_max {
         learned.nis_max = x;

@@ -15,9 +15,11 @@
 //! The innovation `v_m - v_f` is applied to the current velocity (Jacobian: identity on the
 //! velocity error): the measurement comes at most one radar period after `to` and the filter's
 //! velocity error changes slowly. Its covariance is `R_wb(from) diag(s^2) R_wb(from)^T / dt^2`
-//! with the per-axis deviation `s = hypot(base_std_m, scale_std * |d|)` (an absolute part and a
-//! part growing with the distance, the network's error being mostly one of scale). Heading stays
-//! out of the gain as for radar updates ([`crate::rio::RioConfig::radar_heading`]).
+//! with the per-axis deviation `s_i = sqrt(base_std_m^2 + (scale_std |d|)^2 + (predicted_std
+//! sigma_i)^2)`: an absolute part, a part growing with the distance (the network's error being
+//! mostly one of scale) and, for a network with the uncertainty head, a part from its own
+//! predicted deviation `sigma_i` of that window's translation along body axis i. Heading stays out
+//! of the gain as for radar updates ([`crate::rio::RioConfig::radar_heading`]).
 //!
 //! # Online consistency ([`Monitor`])
 //!
@@ -37,6 +39,9 @@ pub struct LearnedConfig {
     pub base_std_m: f64,
     /// Part of the per-axis deviation proportional to the distance moved (unitless).
     pub scale_std: f64,
+    /// Weight of the network's own predicted deviation ([`RelativeMotion::translation_std`]) in
+    /// the per-axis deviation (unitless; 0: not used, and a measurement without one never uses it).
+    pub predicted_std: f64,
     /// Chi-square gate (3 dof; 16.27 = 99.9%).
     pub gate: f64,
     /// Apply only while the recent measurements are consistent ([`Monitor`]).
@@ -95,6 +100,7 @@ impl Default for LearnedConfig {
             // Chosen on the validation set of the benchmark split (docs/model.md, "Fusion").
             base_std_m: 0.09,
             scale_std: 0.3,
+            predicted_std: 0.0,
             gate: 16.27,
             monitor: true,
             window: 40,
@@ -115,6 +121,28 @@ pub struct RelativeMotion {
     pub t_to: f64,
     /// Body position at `to` in the body frame at `from` \[m\].
     pub translation: [f64; 3],
+    /// The network's predicted standard deviation of `translation`, per body axis \[m\] (a model
+    /// with the uncertainty head; `None` otherwise).
+    pub translation_std: Option<[f64; 3]>,
+}
+
+impl LearnedConfig {
+    /// The measurement's deviation per body axis over the interval \[m\] (before dividing by
+    /// its length): see the module documentation. `d` is the (scaled) translation.
+    pub fn deviation(
+        &self,
+        d: &nalgebra::Vector3<f64>,
+        predicted: Option<[f64; 3]>,
+    ) -> nalgebra::Vector3<f64> {
+        let fixed = self.base_std_m.hypot(self.scale_std * d.norm());
+        let p = match predicted {
+            Some(p) if self.predicted_std > 0.0 && p.iter().all(|x| x.is_finite() && *x >= 0.0) => {
+                p
+            }
+            _ => [0.0; 3],
+        };
+        nalgebra::Vector3::from(p.map(|x| fixed.hypot(self.predicted_std * x)))
+    }
 }
 
 /// What became of one learned measurement.
@@ -329,5 +357,45 @@ mod tests {
             (1, 1, 1, 1, 1)
         );
         assert_eq!(c.nis_mean(), Some(9.0));
+    }
+}
+
+#[cfg(test)]
+mod deviation_tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn the_predicted_deviation_adds_per_axis_only_when_weighted_and_valid() {
+        let d = Vector3::new(0.3, 0.0, 0.4); // 0.5 m
+        let off = LearnedConfig::default();
+        let fixed = off.base_std_m.hypot(off.scale_std * 0.5);
+        let p = Some([0.2, 0.0, 1.0]);
+        assert_eq!(
+            off.deviation(&d, p),
+            Vector3::repeat(fixed),
+            "weight 0: not used"
+        );
+        assert_eq!(off.deviation(&d, None), Vector3::repeat(fixed));
+        let on = LearnedConfig {
+            predicted_std: 2.0,
+            ..off
+        };
+        let s = on.deviation(&d, p);
+        assert!((s.x - fixed.hypot(0.4)).abs() < 1e-12);
+        assert!((s.y - fixed).abs() < 1e-12);
+        assert!((s.z - fixed.hypot(2.0)).abs() < 1e-12);
+        assert_eq!(on.deviation(&d, None), Vector3::repeat(fixed));
+        for bad in [
+            [f64::NAN, 0.1, 0.1],
+            [0.1, -0.1, 0.1],
+            [0.1, 0.1, f64::INFINITY],
+        ] {
+            assert_eq!(
+                on.deviation(&d, Some(bad)),
+                Vector3::repeat(fixed),
+                "{bad:?} ignored"
+            );
+        }
     }
 }

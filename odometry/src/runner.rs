@@ -623,8 +623,8 @@ impl Runner {
         let v_learned = r_from * d / dt;
         let v_filter = moved / dt;
         let y = v_learned - v_filter;
-        let s = c.base_std_m.hypot(c.scale_std * d.norm()) / dt;
-        let rm = r_from * Matrix3::from_diagonal_element(s * s) * r_from.transpose();
+        let s = c.deviation(&d, m.translation_std) / dt;
+        let rm = r_from * Matrix3::from_diagonal(&s.component_mul(&s)) * r_from.transpose();
         let Some(nis) = rio.world_velocity_nis(&y, &rm) else {
             return Outcome::Invalid;
         };

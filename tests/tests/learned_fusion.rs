@@ -67,6 +67,7 @@ fn motions(s: &Session, times: &[f64], scale: f64) -> Vec<RelativeMotion> {
                 t_from: *w[0],
                 t_to: *w[1],
                 translation: d.into(),
+                translation_std: None,
             }
         })
         .collect()
@@ -178,6 +179,7 @@ fn at_rest_motions_are_not_applied_and_the_rig_does_not_move() {
             t_from: *w[0],
             t_to: *w[1],
             translation: [0.05, 0.0, 0.0],
+            translation_std: None,
         })
         .collect();
     let r = with(&s, Estimator::Doppler, &m, LearnedConfig::default());
@@ -199,4 +201,61 @@ fn at_rest_motions_are_not_applied_and_the_rig_does_not_move() {
         r.learned
     );
     assert!(wander < 0.01, "moved {wander:.4} m at rest");
+}
+
+#[test]
+fn a_network_that_says_where_it_is_unsure_is_trusted_less_there() {
+    // Every other motion 2.5x too long, and the network says so through a large predicted
+    // deviation (1 m against 1 cm): weighing its own deviation in, the filter follows the right
+    // motions; without it, it averages the wrong ones in.
+    let (_d, s) = simulated(Family::Office, MotionKind::Handheld, 3, 20.0);
+    let doppler = run(&s, &OfflineConfig::default()).unwrap();
+    let times: Vec<f64> = doppler.trajectory.iter().map(|p| p.t).collect();
+    let right = motions(&s, &times, 1.0);
+    let mixed: Vec<RelativeMotion> = right
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            if i % 2 == 0 {
+                RelativeMotion {
+                    translation: r.translation.map(|x| x * 2.5),
+                    translation_std: Some([1.0; 3]),
+                    ..*r
+                }
+            } else {
+                RelativeMotion {
+                    translation_std: Some([0.01; 3]),
+                    ..*r
+                }
+            }
+        })
+        .collect();
+    let base = LearnedConfig {
+        monitor: false,
+        ..LearnedConfig::default()
+    };
+    let right_only: Vec<RelativeMotion> = mixed.iter().skip(1).step_by(2).copied().collect();
+    let blind = ate(&s, &with(&s, Estimator::ImuOnly, &mixed, base));
+    let aware = ate(
+        &s,
+        &with(
+            &s,
+            Estimator::ImuOnly,
+            &mixed,
+            LearnedConfig {
+                predicted_std: 1.0,
+                ..base
+            },
+        ),
+    );
+    let reference = ate(&s, &with(&s, Estimator::ImuOnly, &right_only, base));
+    println!("ATE: blind to the deviation {blind:.3} m, weighing it {aware:.3} m, right motions only {reference:.3} m");
+    assert!(
+        aware < 0.5 * blind,
+        "the predicted deviation must take the wrong motions' weight away"
+    );
+    assert!(
+        aware - reference < 0.1 * (blind - reference),
+        "weighing the deviation must take it at least 90% of the way to having only the right motions"
+    );
 }

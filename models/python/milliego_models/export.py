@@ -80,18 +80,21 @@ def make_metadata(net: MilliEgo, stateful: bool, preprocess: dict | None, norm: 
 def export_model(net: MilliEgo, out: str, meta: dict) -> float:
     """Write the cleaned fp32 ONNX to `out`; returns max |onnxruntime - PyTorch| on a random input."""
     net = net.eval().cpu()
+    # torch.onnx.export puts the module back into the mode it found it in; a fresh wrapper is in
+    # training mode, which would switch dropout on for the check below.
+    wrapper = Exported(net).eval()
     args = example_inputs(net)
     with tempfile.TemporaryDirectory() as tmp:
         raw = os.path.join(tmp, "raw.onnx")
         outputs = ["pose", "state_out"] + (["pose_std"] if net.uncertainty else [])
         # Without the head, the network itself (its initializers keep the parameter names; the wrapper
         # would prefix them with "net.").
-        torch.onnx.export(Exported(net) if net.uncertainty else net, args, raw, input_names=["radar", "imu", "state"], output_names=outputs,
+        torch.onnx.export(wrapper if net.uncertainty else net, args, raw, input_names=["radar", "imu", "state"], output_names=outputs,
                           opset_version=OPSET, dynamo=False, do_constant_folding=True)
         model = onnx.load(raw)
     onnx.save(clean_graph(model, meta), out)
     with torch.no_grad():
-        ref = [t.numpy() for t in Exported(net)(*args)]
+        ref = [t.numpy() for t in wrapper(*args)]
     got = ort_session(out).run(None, {"radar": args[0].numpy(), "imu": args[1].numpy(), "state": args[2].numpy()})
     return float(max(np.abs(a - b).max() for a, b in zip(ref, got)))
 

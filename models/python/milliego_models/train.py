@@ -161,7 +161,12 @@ def load_onnx_weights(net: MilliEgo, path: str) -> dict:
             continue
         w = inits[name]
         if tuple(w.shape) != tuple(value.shape) and name == "convs.0.weight" and meta.get("radar_copies_folded"):
-            w = np.concatenate([np.repeat(w[:, k:k + 1], len(g), 1) / len(g) for k, g in enumerate(RADAR_COPIES)], 1)
+            # Each group's weight on its first channel, zeros on the copies: on copied inputs the same
+            # function, and folding it again at export gives back the same floats (w + 0 + 0 = w).
+            spread = np.zeros((w.shape[0], sum(len(g) for g in RADAR_COPIES)) + w.shape[2:], w.dtype)
+            for k, g in enumerate(RADAR_COPIES):
+                spread[:, g[0]] = w[:, k]
+            w = spread
         if tuple(w.shape) != tuple(value.shape):
             raise ValueError(f"{path}: {name} has shape {w.shape}, the network {tuple(value.shape)}")
         state[name] = torch.from_numpy(np.ascontiguousarray(w, dtype=np.float32))

@@ -78,6 +78,7 @@ impl Estimator for Fused {
                             t_from: r.t_from,
                             t_to: r.t_to,
                             translation: r.rel.translation.vector.into(),
+                            translation_std: self.model.translation_std(),
                         });
                 }
                 Ok(None) => {}

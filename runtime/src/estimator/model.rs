@@ -77,6 +77,14 @@ impl ModelEstimator {
         self.chain.counters().chain_breaks
     }
 
+    /// The predicted standard deviation of the last pose's translation per body axis \[m\], for
+    /// a model with the uncertainty head (`None` otherwise).
+    pub fn translation_std(&self) -> Option<[f64; 3]> {
+        self.model
+            .pose_std()
+            .map(|s| [f64::from(s[0]), f64::from(s[1]), f64::from(s[2])])
+    }
+
     /// Windows whose output was not a finite pose.
     pub fn bad_outputs(&self) -> u64 {
         self.chain.counters().bad_outputs
