@@ -240,9 +240,11 @@ impl Model {
         let uncertainty = match outputs.as_slice() {
             [a, b] if [*a, *b] == OUTPUTS => false,
             [a, b, c] if [*a, *b] == OUTPUTS && *c == STD_OUTPUT => true,
-            _ => return Err(iface(format!(
+            _ => {
+                return Err(iface(format!(
                 "outputs {outputs:?}, expected {OUTPUTS:?}, optionally followed by {STD_OUTPUT:?}"
-            ))),
+            )))
+            }
         };
         let h = meta.hidden;
         let mut model = onnx.model_for_proto_model(&proto).map_err(load_err)?;
