@@ -258,3 +258,37 @@ fn radar_zeroed_feeds_zeros_instead_of_the_images() {
     m.set_radar_zeroed(false);
     assert_eq!(m.step(&w).unwrap(), with_radar);
 }
+
+#[test]
+fn a_model_with_the_uncertainty_head_reports_its_deviation() {
+    // An untrained tiny network with the head (`python -m milliego_models.fixtures`), and
+    // onnxruntime's outputs for one input (radar zeros).
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+    let mut m = Model::load(
+        &dir.join("tiny-uncertainty.onnx"),
+        Some(&milliego_preprocess::Config::default()),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert!(m.has_uncertainty());
+    assert_eq!(m.pose_std(), None, "no deviation before a step");
+    let bytes = std::fs::read(dir.join("tiny-uncertainty.safetensors")).unwrap();
+    let st = SafeTensors::deserialize(&bytes).unwrap();
+    let imu = imu_rows(&f32s(&st, "imu"));
+    let pose = m.step_tensors(&vec![0.0; RADAR_LEN], &imu).unwrap();
+    let d = max_abs(&pose, &f32s(&st, "pose"));
+    assert!(d <= 1e-4, "pose {pose:?} differs from onnxruntime by {d}");
+    let std = m.pose_std().expect("a deviation after the step");
+    let want = f32s(&st, "pose_std");
+    assert!(
+        max_abs(&std, &want) <= 1e-4,
+        "{std:?} vs onnxruntime {want:?}"
+    );
+    assert!(std.iter().all(|s| *s > 0.0));
+    m.reset();
+    assert_eq!(m.pose_std(), None, "reset forgets the deviation");
+    // The shipped model has no head: no deviation, ever.
+    let mut plain = Model::load(&model_dir().join("model.onnx"), None).unwrap();
+    assert!(!plain.has_uncertainty());
+    plain.step_tensors(&vec![0.0; RADAR_LEN], &imu).unwrap();
+    assert_eq!(plain.pose_std(), None);
+}

@@ -5,12 +5,15 @@ import numpy as np
 import onnx
 import torch
 
-from conftest import PYTHON, subprocess_env
+from conftest import PKG_ROOT, PYTHON, subprocess_env
 from milliego_models.data import load_dataset
 from milliego_models.export import OPSET, example_inputs, load_checkpoint, make_metadata
 from milliego_models.model import RADAR_COPIES
 from milliego_models.onnx_utils import (ALLOWED_OPS, fold_constants, fold_copied_inputs, fold_pads_into_convs,
                                         get_metadata, nonzero_zero_points, ort_session, set_metadata)
+
+
+PKG_MODEL = PKG_ROOT.parents[0] / "compact" / "model.onnx"
 
 
 def run(*args):
@@ -187,3 +190,20 @@ def test_reexport_folds_an_older_file(stateful_run, tmp_path):
     r = subprocess.run([PYTHON, "-m", "milliego_models.export", "--onnx", str(new), "--out", str(tmp_path / "x.onnx")],
                        env=subprocess_env(), capture_output=True, text=True, timeout=300)
     assert r.returncode == 2 and "already folded" in r.stderr, r.stderr
+
+
+def test_fixtures_write_a_loadable_uncertainty_model(tmp_path):
+    from safetensors.numpy import load_file
+    out = run("milliego_models.fixtures", "--out", tmp_path)
+    assert "tiny-uncertainty.onnx" in out
+    model = onnx.load(tmp_path / "tiny-uncertainty.onnx")
+    assert [o.name for o in model.graph.output] == ["pose", "state_out", "pose_std"]
+    meta = get_metadata(model)
+    ref = get_metadata(onnx.load(PKG_MODEL))
+    assert meta["trained"] is False and meta["preprocess"] == ref["preprocess"] and meta["norm"] == ref["norm"]
+    t = load_file(str(tmp_path / "tiny-uncertainty.safetensors"))
+    feed = {"radar": np.zeros((1, 6, 64, 256), np.float32), "imu": t["imu"], "state": t["state"]}
+    pose, std = ort_session(str(tmp_path / "tiny-uncertainty.onnx")).run(["pose", "pose_std"], feed)
+    np.testing.assert_array_equal(pose, t["pose"])
+    np.testing.assert_array_equal(std, t["pose_std"])
+    assert np.all(std > 0) and np.ptp(std) > 0
