@@ -241,9 +241,9 @@ impl Model {
             [a, b] if [*a, *b] == OUTPUTS => false,
             [a, b, c] if [*a, *b] == OUTPUTS && *c == STD_OUTPUT => true,
             _ => {
-                return Err(iface(format!(
-                "outputs {outputs:?}, expected {OUTPUTS:?}, optionally followed by {STD_OUTPUT:?}"
-            )))
+                let why =
+                    format!("outputs {outputs:?}, expected {OUTPUTS:?} (then {STD_OUTPUT:?})");
+                return Err(iface(why));
             }
         };
         let h = meta.hidden;

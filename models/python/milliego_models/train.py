@@ -298,8 +298,12 @@ def main(argv=None) -> int:
         for name, prm in net.named_parameters():
             prm.requires_grad_(name.startswith("std_head."))
     trainable = [prm for prm in net.parameters() if prm.requires_grad]
-    clip_groups = [g for g in ([prm for n, prm in net.named_parameters() if prm.requires_grad and not n.startswith("std_head.")],
-                               [prm for n, prm in net.named_parameters() if prm.requires_grad and n.startswith("std_head.")]) if g]
+    # Gradient clipping per group: the pose path, then the uncertainty head.
+    clip_groups = [[], []]
+    for name, prm in net.named_parameters():
+        if prm.requires_grad:
+            clip_groups[name.startswith("std_head.")].append(prm)
+    clip_groups = [g for g in clip_groups if g]
     log(f"config {args.config}: {count_params(net):,} parameters ({sum(p.numel() for p in trainable):,} trained), "
         f"mode {args.mode}, uncertainty {args.uncertainty}")
     opt = (torch.optim.Adam(trainable, lr=args.lr) if args.optimizer == "adam"

@@ -77,8 +77,9 @@ impl ModelEstimator {
         self.chain.counters().chain_breaks
     }
 
-    /// The predicted standard deviation of the last pose's translation per body axis \[m\], for
-    /// a model with the uncertainty head (`None` otherwise).
+    /// The predicted standard deviation of the translation of the pose [`Estimator::push_radar`]
+    /// last returned, per body axis \[m\], for a model with the uncertainty head (`None`
+    /// otherwise). That pose is always the model's last step: off-chain windows do not run it.
     pub fn translation_std(&self) -> Option<[f64; 3]> {
         self.model
             .pose_std()
