@@ -333,7 +333,11 @@ fn model_checks(dir: &std::path::Path, checks: &mut Map<String, Value>) -> Resul
     let mut all_ok = true;
     for (file, key, tol) in [
         ("model.onnx", "fp32", 1e-4f64),
-        ("model-int8.onnx", "int8", 2e-2),
+        (
+            "model-int8.onnx",
+            "int8",
+            f64::from(milliego_models::INT8_TOLERANCE),
+        ),
     ] {
         let mut m = milliego_models::Model::load(&dir.join(file), None)?;
         let h = m.meta().hidden;

@@ -7,11 +7,14 @@ Recipe (see shared/reference/milliego-model.md, tract findings): onnxruntime `qu
 QOperator format, s8 activations and weights, both symmetric (zero point 0, so tract folds the int8
 weights once), only standard QLinearConv and QLinearMatMul plus
 QuantizeLinear / DequantizeLinear around them; every other op stays fp32. Default `--ops auto`: the
-convolutions, and the MatMuls whose weight matrix has at least 2^20 elements (the paper graph's fusion
-LSTM matrices, memory-bound matrix-vector products; no compact-model MatMul is that large, so for the
-compact model `auto` is `conv`). On the simulator's held-out test set the compact model's int8 ATE is
-1.71 m against 1.70 m fp32 with convs only, 2.22-2.33 m with every MatMul (LSTMs, attention, heads)
-quantized as well (`--ops conv+matmul`). Convolutions with fewer than 16 output channels are widened
+convolutions, and the MatMuls whose weight matrix has at least 2^18 elements (memory-bound matrix-
+vector products: the fusion-LSTM input projections; in the compact model only the first one's two
+parts, below). On the simulator's held-out test set the compact model's int8 ATE was 1.71 m against
+1.70 m fp32 with convs only, 2.22-2.33 m with every MatMul (LSTMs, attention, heads) quantized as well
+(`--ops conv+matmul`). A MatMul that reads a Concat is split into one MatMul per concatenated input
+first (`split_concat_matmuls`), so that each part is quantized with its own activation scale: the
+compact model's fusion projection reads radar and IMU features of different ranges (validation
+ATE unchanged with the split, 0.7-0.8% worse without it; docs/model.md). Convolutions with fewer than 16 output channels are widened
 with zero filters first (`pad_narrow_convs`: same values, but tract then runs them on its 16-row int8
 tile; the compact model's first convolution, 8 channels, ran 3x slower on the 8-row one). Timings per
 recipe: docs/int8-speed.md. No com.microsoft ops. Calibration (MinMax) runs
@@ -35,8 +38,10 @@ MAX_CHAIN_RUN = 200
 # `--ops auto` quantizes a MatMul only when its weight matrix has at least this many elements: the
 # large matrix-vector products are memory-bound and int8 moves a quarter of the bytes, while small
 # ones run faster in fp32 in tract (no quantize/dequantize around them, no int8 tile set-up) and
-# keep the LSTMs' accuracy. 2^20: the paper graph's fusion LSTM matrices; none of the compact ones.
-MIN_MATMUL_WEIGHTS = 1 << 20
+# keep the LSTMs' accuracy. 2^18: the compact model's fusion projection parts (512 x 512 and
+# 1280 x 512; its next largest MatMul has 81920 weights), the paper graph's fusion-LSTM matrices
+# and its attention / cross-modal projections.
+MIN_MATMUL_WEIGHTS = 1 << 18
 # Convolutions narrower than this many output channels are widened with zero filters before
 # quantizing (`pad_narrow_convs`): tract's int8 kernels tile 16 output channels at a time.
 CONV_TILE = 16
@@ -135,6 +140,60 @@ def pad_narrow_convs(model: onnx.ModelProto, width: int = CONV_TILE) -> list[str
     return widened
 
 
+def split_concat_matmuls(model: onnx.ModelProto) -> list[str]:
+    """Splits, in place, every MatMul whose left operand is a Concat along its last axis and whose
+    right operand is a constant [K, N] matrix into one MatMul per Concat input (the matching rows of
+    the matrix) and an Add of their results: the same values up to float rounding. Quantized, each
+    part then gets its own activation scale. The compact model's fusion-LSTM projection reads the
+    radar features (512) and the IMU features (1280) concatenated, whose ranges differ; with one
+    scale for both its int8 form cost 0.7-0.8% held-out ATE, with one per part none (docs/model.md).
+    tract splits that product the same way internally, so the split costs nothing in fp32.
+    Returns the split MatMuls' names."""
+    from onnx import numpy_helper as nh
+    g = model.graph
+    inits = {i.name: i for i in g.initializer}
+    producers = {o: n for n in g.node for o in n.output}
+    consumers = consumers_of(g)
+    outputs = {o.name for o in g.output}
+    inferred = onnx.shape_inference.infer_shapes(model).graph
+    dims = {v.name: [d.dim_value if d.HasField("dim_value") else None for d in v.type.tensor_type.shape.dim]
+            for v in list(inferred.value_info) + list(inferred.input) + list(inferred.output)}
+    split, nodes, dropped = [], [], set()
+    for n in g.node:
+        cat = producers.get(n.input[0]) if n.op_type == "MatMul" else None
+        w = nh.to_array(inits[n.input[1]]) if cat is not None and n.input[1] in inits else None
+        parts = [dims.get(x) for x in cat.input] if w is not None and cat.op_type == "Concat" else []
+        axis = next((a.i for a in cat.attribute if a.name == "axis"), 0) if parts else 0
+        widths = [p[-1] if p else None for p in parts]
+        if (w is None or w.ndim != 2 or len(parts) < 2 or any(p is None or len(p) != len(parts[0]) for p in parts)
+                or axis % len(parts[0]) != len(parts[0]) - 1 or None in widths or sum(widths) != w.shape[0]):
+            nodes.append(n)
+            continue
+        terms, row = [], 0
+        for k, (x, width) in enumerate(zip(cat.input, widths)):
+            name = f"{n.input[1]}.part{k}"
+            g.initializer.append(nh.from_array(np.ascontiguousarray(w[row:row + width]), name))
+            row += width
+            terms.append(f"{n.output[0]}.part{k}")
+            nodes.append(onnx.helper.make_node("MatMul", [x, name], [terms[-1]], name=f"{n.name}.part{k}"))
+        for k in range(1, len(terms)):
+            out = n.output[0] if k == len(terms) - 1 else f"{n.output[0]}.sum{k}"
+            nodes.append(onnx.helper.make_node("Add", [terms[k - 1] if k == 1 else f"{n.output[0]}.sum{k - 1}",
+                                                      terms[k]], [out], name=f"{n.name}.sum{k}"))
+        if len(consumers[cat.output[0]]) == 1 and cat.output[0] not in outputs:
+            dropped.add(id(cat))
+        split.append(n.name)
+    if split:
+        used_inits = {i for node in nodes if id(node) not in dropped for i in node.input}
+        del g.node[:]
+        g.node.extend(node for node in nodes if id(node) not in dropped)
+        keep = [i for i in g.initializer if i.name in used_inits]
+        del g.initializer[:]
+        g.initializer.extend(keep)
+        del g.value_info[:]
+    return split
+
+
 def quantize_model(fp32_path: str, out_path: str, feeds: list[dict], per_channel: bool = False,
                    ops: str = "auto", calibration: str = "dataset",
                    min_matmul_weights: int = MIN_MATMUL_WEIGHTS) -> float:
@@ -153,14 +212,15 @@ def quantize_model(fp32_path: str, out_path: str, feeds: list[dict], per_channel
     # steps and the rotation output degrades (measured: yaw errors ~1 deg per window). It is
     # 20 x 6 x 4H MACs, nothing next to the convolutions.
     fp32_model = onnx.load(fp32_path)
+    widened = pad_narrow_convs(fp32_model)
+    split = split_concat_matmuls(fp32_model)
     exclude = [n.name for n in fp32_model.graph.node
                if n.op_type in ("MatMul", "Conv") and "imu" in n.input]
     if ops == "auto":
         exclude += small_matmuls(fp32_model, min_matmul_weights)
-    widened = pad_narrow_convs(fp32_model)
     source = fp32_path
-    if widened:
-        source = out_path + ".widened-fp32.onnx"
+    if widened or split:
+        source = out_path + ".prepared-fp32.onnx"
         onnx.save(fp32_model, source)
     try:
         quantize_static(source, out_path, Reader(), quant_format=QuantFormat.QOperator,
@@ -181,7 +241,7 @@ def quantize_model(fp32_path: str, out_path: str, feeds: list[dict], per_channel
     meta.update(precision="int8", quantization={
         "recipe": "onnxruntime quantize_static QOperator, s8 symmetric activations+weights",
         "ops": ops, "min_matmul_weights": min_matmul_weights if ops == "auto" else None,
-        "widened_convs": widened,
+        "widened_convs": widened, "split_matmuls": split,
         "per_channel": per_channel, "calibration": calibration, "calib_windows": len(feeds)})
     set_metadata(model, meta)
     onnx.save(model, out_path)
@@ -202,7 +262,7 @@ def main(argv=None) -> int:
                         "conv+matmul: every MatMul too, which cost the compact model 31%% held-out ATE, "
                         "see models/python/README.md)")
     p.add_argument("--min-matmul-weights", type=int, default=MIN_MATMUL_WEIGHTS,
-                   help="with --ops auto: smallest weight matrix (elements) quantized (default 2^20)")
+                   help="with --ops auto: smallest weight matrix (elements) quantized (default 2^18)")
     a = p.parse_args(argv)
     from .data import load_any
     meta = get_metadata(onnx.load(a.model))

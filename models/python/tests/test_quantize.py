@@ -3,7 +3,7 @@ import onnx
 from onnx import TensorProto, helper, numpy_helper
 
 from milliego_models.onnx_utils import ort_session
-from milliego_models.quantize import pad_narrow_convs, small_matmuls
+from milliego_models.quantize import pad_narrow_convs, small_matmuls, split_concat_matmuls
 
 
 def _chain(tmp_path, widths=(3, 4, 5), act="LeakyRelu", extra_consumer=False):
@@ -65,3 +65,48 @@ def test_small_matmuls_are_listed_by_weight_size(tmp_path):
     model, _ = _chain(tmp_path)
     assert small_matmuls(model, 49) == ["mm"]  # 8 x 6 = 48 weights
     assert small_matmuls(model, 48) == []
+
+
+def _concat_matmul(tmp_path, axis=-1, concat_is_output=False):
+    """a [2,3], b [2,5] -> Concat(axis) -> MatMul(8 x 4) -> y."""
+    w = np.random.default_rng(2).normal(size=(8, 4)).astype(np.float32)
+    shapes = ([2, 3], [2, 5]) if axis in (-1, 1) else ([3, 8], [5, 8])
+    nodes = [helper.make_node("Concat", ["a", "b"], ["ab"], name="cat", axis=axis),
+             helper.make_node("MatMul", ["ab", "w"], ["y"], name="mm")]
+    outputs = [helper.make_tensor_value_info("y", TensorProto.FLOAT, [shapes[0][0], 4])]
+    if concat_is_output:
+        outputs.append(helper.make_tensor_value_info("ab", TensorProto.FLOAT, [2, 8]))
+    graph = helper.make_graph(
+        nodes, "cat", [helper.make_tensor_value_info(n, TensorProto.FLOAT, s) for n, s in zip("ab", shapes)],
+        outputs, [numpy_helper.from_array(w, "w")])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)], ir_version=8)
+    path = tmp_path / "cat.onnx"
+    onnx.save(model, path)
+    feeds = {n: np.random.default_rng(3).normal(size=s).astype(np.float32) for n, s in zip("ab", shapes)}
+    return model, path, feeds
+
+
+def test_a_matmul_of_a_concat_is_split_per_input_without_changing_values(tmp_path):
+    for axis, as_output in ((-1, False), (1, False), (1, True)):
+        model, path, feeds = _concat_matmul(tmp_path, axis, as_output)
+        before = ort_session(str(path)).run(None, feeds)
+        assert split_concat_matmuls(model) == ["mm"]
+        ops = [n.op_type for n in model.graph.node]
+        # The Concat stays only where something else reads it (here: a graph output).
+        assert ops == (["Concat"] if as_output else []) + ["MatMul", "MatMul", "Add"]
+        w = _weights(model)
+        assert "w" not in w and w["w.part0"].shape == (3, 4) and w["w.part1"].shape == (5, 4)
+        assert small_matmuls(model, 13) == ["mm.part0"]  # each part is judged by its own size
+        onnx.checker.check_model(model)
+        split = tmp_path / "split.onnx"
+        onnx.save(model, split)
+        after = ort_session(str(split)).run(None, feeds)
+        np.testing.assert_allclose(after[0], before[0], rtol=1e-6, atol=1e-6)
+        if as_output:
+            np.testing.assert_array_equal(after[1], before[1])
+
+
+def test_a_concat_along_another_axis_is_left_alone(tmp_path):
+    model, _, _ = _concat_matmul(tmp_path, axis=0)
+    assert split_concat_matmuls(model) == []
+    assert [n.op_type for n in model.graph.node] == ["Concat", "MatMul"]
