@@ -47,7 +47,8 @@ pub struct ScoreArgs {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     json: bool,
-    /// Learned models to score (ONNX from milliego_models.export / quantize); repeatable.
+    /// Learned models to score (ONNX from milliego_models.export / quantize); repeatable. Rows
+    /// are named by config and precision, and by the file too where two models share those.
     /// Default: models/compact/model.onnx and model-int8.onnx when present.
     #[arg(long)]
     model: Vec<PathBuf>,
@@ -137,6 +138,25 @@ pub(crate) fn run_runtime(
     Ok((poses?, s.report.learned, s.report.frames_out.handovers))
 }
 
+/// One label per model: its metadata's `config precision`, with the file's path after it where two
+/// models would otherwise share a label (two retrained compact int8 files, say), so that no row of the
+/// table or key of `--json` stands for two models. The same file given twice is an error.
+fn unique_labels(paths: &[PathBuf], labels: &[String]) -> Result<Vec<String>> {
+    let mut out = Vec::with_capacity(labels.len());
+    for (i, (path, label)) in paths.iter().zip(labels).enumerate() {
+        if paths[..i].contains(path) {
+            return Err(format!("--model {} is given twice", path.display()).into());
+        }
+        let shared = labels.iter().filter(|l| *l == label).count() > 1;
+        out.push(if shared {
+            format!("{label} [{}]", path.display())
+        } else {
+            label.clone()
+        });
+    }
+    Ok(out)
+}
+
 fn default_models() -> Vec<PathBuf> {
     [
         "models/compact/model.onnx",
@@ -182,16 +202,24 @@ pub fn run(a: ScoreArgs) -> Result<()> {
     } else {
         a.model.clone()
     };
+    let mut loaded = Vec::new();
     for path in &models {
         let m = Model::load(path, Some(&milliego_preprocess::Config::default()))?;
-        let name = format!(
-            "milliEgo {} {}{}",
+        let label = format!(
+            "{} {}{}",
             m.meta().config,
             m.meta().precision,
             if m.meta().trained { "" } else { " (UNTRAINED)" }
         );
+        loaded.push((m, label));
+    }
+    let labels = unique_labels(
+        &models,
+        &loaded.iter().map(|(_, l)| l.clone()).collect::<Vec<_>>(),
+    )?;
+    for ((path, (m, _)), label) in models.iter().zip(loaded).zip(labels) {
+        let name = format!("milliEgo {label}");
         let runtime = !a.no_fused;
-        let label = name.trim_start_matches("milliEgo ").to_string();
         // The same network with its radar input zeroed: what the radar adds to it.
         let mut ablated = Model::load(path, Some(&milliego_preprocess::Config::default()))?;
         ablated.set_radar_zeroed(true);
@@ -346,14 +374,16 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         entries.len(),
         set.name()
     );
+    // Wide enough for the longest name (models told apart by their file have long ones).
+    let w = per.iter().map(|(n, _)| n.len()).max().unwrap_or(0).max(36);
     println!(
-        "{:<36} {:>22} {:>22} {:>10}",
+        "{:<w$} {:>22} {:>22} {:>10}",
         "estimator", "ATE 3D mean/std/max", "ATE 2D mean/std/max", "drift %"
     );
     for (name, v) in &per {
         let (a3, a2, d) = summarise(v);
         println!(
-            "{name:<36} {:>7.2}/{:>6.2}/{:>7.2} {:>7.2}/{:>6.2}/{:>7.2} {:>10.2}",
+            "{name:<w$} {:>7.2}/{:>6.2}/{:>7.2} {:>7.2}/{:>6.2}/{:>7.2} {:>10.2}",
             a3.mean, a3.std, a3.max, a2.mean, a2.std, a2.max, d.mean
         );
     }
@@ -367,4 +397,39 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::unique_labels;
+    use std::path::PathBuf;
+
+    #[test]
+    fn models_that_share_a_label_are_told_apart_by_their_file() {
+        let paths: Vec<PathBuf> = [
+            "models/compact/model-int8.onnx",
+            "retrained/int8.onnx",
+            "models/compact/model.onnx",
+        ]
+        .iter()
+        .map(PathBuf::from)
+        .collect();
+        let labels = ["compact int8", "compact int8", "compact fp32"].map(String::from);
+        assert_eq!(
+            unique_labels(&paths, &labels).unwrap(),
+            [
+                "compact int8 [models/compact/model-int8.onnx]",
+                "compact int8 [retrained/int8.onnx]",
+                "compact fp32",
+            ]
+        );
+    }
+
+    #[test]
+    fn the_same_model_twice_is_an_error() {
+        let paths = vec![PathBuf::from("a.onnx"), PathBuf::from("a.onnx")];
+        let labels = ["compact int8", "compact int8"].map(String::from);
+        let e = unique_labels(&paths, &labels).unwrap_err().to_string();
+        assert!(e.contains("a.onnx is given twice"), "{e}");
+    }
 }
