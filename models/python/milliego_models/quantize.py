@@ -14,8 +14,8 @@ parts, below). On the simulator's held-out test set the compact model's int8 ATE
 (`--ops conv+matmul`). A MatMul that reads a Concat is split into one MatMul per concatenated input
 first (`split_concat_matmuls`), so that each part is quantized with its own activation scale: the
 compact model's fusion projection reads radar and IMU features of different ranges (validation
-ATE unchanged with the split, 0.7-0.8% worse without it; docs/model.md). Convolutions with fewer than 16 output channels are widened
-with zero filters first (`pad_narrow_convs`: same values, but tract then runs them on its 16-row int8
+ATE unchanged with the split, 0.7-0.8% worse without it; docs/int8-speed.md). Convolutions with fewer
+than 16 output channels are widened with zero filters first (`pad_narrow_convs`: same values, but tract then runs them on its 16-row int8
 tile; the compact model's first convolution, 8 channels, ran 3x slower on the 8-row one). Timings per
 recipe: docs/int8-speed.md. No com.microsoft ops. Calibration (MinMax) runs
 on real dataset windows; for a stateful model the `state` input of each calibration window is the state
@@ -146,7 +146,8 @@ def split_concat_matmuls(model: onnx.ModelProto) -> list[str]:
     the matrix) and an Add of their results: the same values up to float rounding. Quantized, each
     part then gets its own activation scale. The compact model's fusion-LSTM projection reads the
     radar features (512) and the IMU features (1280) concatenated, whose ranges differ; with one
-    scale for both its int8 form cost 0.7-0.8% held-out ATE, with one per part none (docs/model.md).
+    scale for both its int8 form cost 0.7-0.8% validation ATE, with one per part none
+    (docs/int8-speed.md).
     tract splits that product the same way internally, so the split costs nothing in fp32.
     Returns the split MatMuls' names."""
     from onnx import numpy_helper as nh
@@ -158,36 +159,51 @@ def split_concat_matmuls(model: onnx.ModelProto) -> list[str]:
     inferred = onnx.shape_inference.infer_shapes(model).graph
     dims = {v.name: [d.dim_value if d.HasField("dim_value") else None for d in v.type.tensor_type.shape.dim]
             for v in list(inferred.value_info) + list(inferred.input) + list(inferred.output)}
-    split, nodes, dropped = [], [], set()
+
+    def part_widths(n) -> list[int] | None:
+        """The Concat inputs' widths along the last axis, when `n` can be split; else None."""
+        if n.op_type != "MatMul" or n.input[1] not in inits or n.input[0] not in producers:
+            return None
+        cat = producers[n.input[0]]
+        shapes = [dims.get(x) for x in cat.input]
+        if cat.op_type != "Concat" or len(shapes) < 2 or any(not p or len(p) != len(shapes[0]) for p in shapes):
+            return None
+        axis = next((a.i for a in cat.attribute if a.name == "axis"), 0)
+        widths = [p[-1] for p in shapes]
+        w = inits[n.input[1]].dims
+        if axis % len(shapes[0]) != len(shapes[0]) - 1 or None in widths or len(w) != 2 or sum(widths) != w[0]:
+            return None
+        return widths
+
+    split, nodes, dropped, replaced = [], [], set(), set()
     for n in g.node:
-        cat = producers.get(n.input[0]) if n.op_type == "MatMul" else None
-        w = nh.to_array(inits[n.input[1]]) if cat is not None and n.input[1] in inits else None
-        parts = [dims.get(x) for x in cat.input] if w is not None and cat.op_type == "Concat" else []
-        axis = next((a.i for a in cat.attribute if a.name == "axis"), 0) if parts else 0
-        widths = [p[-1] if p else None for p in parts]
-        if (w is None or w.ndim != 2 or len(parts) < 2 or any(p is None or len(p) != len(parts[0]) for p in parts)
-                or axis % len(parts[0]) != len(parts[0]) - 1 or None in widths or sum(widths) != w.shape[0]):
+        widths = part_widths(n)
+        if widths is None:
             nodes.append(n)
             continue
-        terms, row = [], 0
+        cat, w = producers[n.input[0]], nh.to_array(inits[n.input[1]])
+        acc, row = None, 0
         for k, (x, width) in enumerate(zip(cat.input, widths)):
             name = f"{n.input[1]}.part{k}"
             g.initializer.append(nh.from_array(np.ascontiguousarray(w[row:row + width]), name))
             row += width
-            terms.append(f"{n.output[0]}.part{k}")
-            nodes.append(onnx.helper.make_node("MatMul", [x, name], [terms[-1]], name=f"{n.name}.part{k}"))
-        for k in range(1, len(terms)):
-            out = n.output[0] if k == len(terms) - 1 else f"{n.output[0]}.sum{k}"
-            nodes.append(onnx.helper.make_node("Add", [terms[k - 1] if k == 1 else f"{n.output[0]}.sum{k - 1}",
-                                                      terms[k]], [out], name=f"{n.name}.sum{k}"))
+            term = f"{n.output[0]}.part{k}"
+            nodes.append(onnx.helper.make_node("MatMul", [x, name], [term], name=f"{n.name}.part{k}"))
+            if acc is not None:
+                out = n.output[0] if k == len(widths) - 1 else f"{n.output[0]}.sum{k}"
+                nodes.append(onnx.helper.make_node("Add", [acc, term], [out], name=f"{n.name}.sum{k}"))
+                term = out
+            acc = term
         if len(consumers[cat.output[0]]) == 1 and cat.output[0] not in outputs:
             dropped.add(id(cat))
+        replaced.add(n.input[1])
         split.append(n.name)
     if split:
-        used_inits = {i for node in nodes if id(node) not in dropped for i in node.input}
         del g.node[:]
         g.node.extend(node for node in nodes if id(node) not in dropped)
-        keep = [i for i in g.initializer if i.name in used_inits]
+        # The split matrices go unless something else still reads them; other initializers stay.
+        still_read = {i for node in g.node for i in node.input}
+        keep = [i for i in g.initializer if i.name not in replaced or i.name in still_read]
         del g.initializer[:]
         g.initializer.extend(keep)
         del g.value_info[:]
@@ -207,13 +223,13 @@ def quantize_model(fp32_path: str, out_path: str, feeds: list[dict], per_channel
         def get_next(self):
             return next(self.it, None)
 
+    fp32_model = onnx.load(fp32_path)
+    widened = pad_narrow_convs(fp32_model)
+    split = split_concat_matmuls(fp32_model)  # before `small_matmuls`: each part judged by its size
     # The MatMul fed by the raw IMU window stays fp32: its input mixes specific force (~10 m/s^2)
     # and rate of turn (~0.1 rad/s); one symmetric int8 scale for both rounds the gyro to a few
     # steps and the rotation output degrades (measured: yaw errors ~1 deg per window). It is
     # 20 x 6 x 4H MACs, nothing next to the convolutions.
-    fp32_model = onnx.load(fp32_path)
-    widened = pad_narrow_convs(fp32_model)
-    split = split_concat_matmuls(fp32_model)
     exclude = [n.name for n in fp32_model.graph.node
                if n.op_type in ("MatMul", "Conv") and "imu" in n.input]
     if ops == "auto":

@@ -110,3 +110,22 @@ def test_a_concat_along_another_axis_is_left_alone(tmp_path):
     model, _, _ = _concat_matmul(tmp_path, axis=0)
     assert split_concat_matmuls(model) == []
     assert [n.op_type for n in model.graph.node] == ["Concat", "MatMul"]
+
+
+def test_a_concat_of_three_is_summed_in_a_chain(tmp_path):
+    w = np.random.default_rng(4).normal(size=(10, 4)).astype(np.float32)
+    shapes = ([2, 3], [2, 5], [2, 2])
+    graph = helper.make_graph(
+        [helper.make_node("Concat", ["a", "b", "c"], ["abc"], name="cat", axis=1),
+         helper.make_node("MatMul", ["abc", "w"], ["y"], name="mm")], "cat3",
+        [helper.make_tensor_value_info(n, TensorProto.FLOAT, s) for n, s in zip("abc", shapes)],
+        [helper.make_tensor_value_info("y", TensorProto.FLOAT, [2, 4])], [numpy_helper.from_array(w, "w")])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)], ir_version=8)
+    feeds = {n: np.random.default_rng(5).normal(size=s).astype(np.float32) for n, s in zip("abc", shapes)}
+    onnx.save(model, tmp_path / "cat3.onnx")
+    before = ort_session(str(tmp_path / "cat3.onnx")).run(None, feeds)[0]
+    assert split_concat_matmuls(model) == ["mm"]
+    assert [n.op_type for n in model.graph.node] == ["MatMul", "MatMul", "Add", "MatMul", "Add"]
+    onnx.save(model, tmp_path / "split3.onnx")
+    after = ort_session(str(tmp_path / "split3.onnx")).run(None, feeds)[0]
+    np.testing.assert_allclose(after, before, rtol=1e-6, atol=1e-6)
