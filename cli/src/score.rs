@@ -29,6 +29,22 @@ type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 /// Per session: ATE 3D mean, ATE 2D mean \[m\], final drift \[% of path\].
 type SessionScore = (f64, f64, f64);
 
+/// The row every other is compared with, session by session.
+const BASELINE: &str = "Doppler RIO";
+
+/// A session counts as worse than [`BASELINE`]'s when its mean 3D ATE exceeds the baseline's by
+/// more than this factor (issue 19's bar for `milliego run`'s default: never more than 10% worse).
+const WORSE_FACTOR: f64 = 1.1;
+
+/// Sessions of `v` whose mean 3D ATE exceeds `base`'s on the same session (same order) by more
+/// than [`WORSE_FACTOR`].
+fn sessions_worse(v: &[SessionScore], base: &[SessionScore]) -> usize {
+    v.iter()
+        .zip(base)
+        .filter(|(x, b)| x.0 > WORSE_FACTOR * b.0)
+        .count()
+}
+
 #[derive(Debug, Args)]
 pub struct ScoreArgs {
     /// Benchmark set: train, val or test (held out: unseen family and seeds).
@@ -193,7 +209,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             "IMU dead reckoning".into(),
             Column::Classical(Estimator::ImuOnly),
         ),
-        ("Doppler RIO".into(), Column::Classical(Estimator::Doppler)),
+        (BASELINE.into(), Column::Classical(Estimator::Doppler)),
     ];
     let models = if a.no_model {
         Vec::new()
@@ -343,6 +359,13 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         let pick = |f: fn(&SessionScore) -> f64| Stats::of(&v.iter().map(f).collect::<Vec<_>>());
         (pick(|x| x.0), pick(|x| x.1), pick(|x| x.2))
     };
+    let base = per
+        .iter()
+        .find(|(n, _)| n == BASELINE)
+        .map(|(_, v)| v.clone())
+        .unwrap_or_default();
+    // Sessions worse than the baseline, for every other row.
+    let worse = |n: &str, v: &[SessionScore]| (n != BASELINE).then(|| sessions_worse(v, &base));
     if a.json {
         let rows: serde_json::Map<String, serde_json::Value> = per
             .iter()
@@ -353,6 +376,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
                     .map(|x| json!({"ate_3d_mean_m": x.0, "ate_2d_mean_m": x.1, "drift_pct": x.2}))
                     .collect();
                 (n.clone(), json!({"ate_3d_mean_m": a3.mean, "ate_3d_std_m": a3.std, "ate_3d_max_m": a3.max,
+                    "ate_3d_median_m": a3.median, "sessions_worse_than_doppler": worse(n, v),
                     "ate_2d_mean_m": a2.mean, "ate_2d_std_m": a2.std, "ate_2d_max_m": a2.max, "drift_pct_mean": d.mean, "sessions": v.len(),
                     "per_session": each}))
             })
@@ -377,16 +401,26 @@ pub fn run(a: ScoreArgs) -> Result<()> {
     // Wide enough for the longest name (models told apart by their file have long ones).
     let w = per.iter().map(|(n, _)| n.len()).max().unwrap_or(0).max(36);
     println!(
-        "{:<w$} {:>22} {:>22} {:>10}",
-        "estimator", "ATE 3D mean/std/max", "ATE 2D mean/std/max", "drift %"
+        "{:<w$} {:>22} {:>22} {:>10} {:>10} {:>12}",
+        "estimator",
+        "ATE 3D mean/std/max",
+        "ATE 2D mean/std/max",
+        "drift %",
+        "3D median",
+        "> 1.1x RIO"
     );
     for (name, v) in &per {
         let (a3, a2, d) = summarise(v);
+        let worse =
+            worse(name, v).map_or_else(|| "-".to_string(), |k| format!("{k} of {}", v.len()));
         println!(
-            "{name:<w$} {:>7.2}/{:>6.2}/{:>7.2} {:>7.2}/{:>6.2}/{:>7.2} {:>10.2}",
-            a3.mean, a3.std, a3.max, a2.mean, a2.std, a2.max, d.mean
+            "{name:<w$} {:>7.2}/{:>6.2}/{:>7.2} {:>7.2}/{:>6.2}/{:>7.2} {:>10.2} {:>10.2} {worse:>12}",
+            a3.mean, a3.std, a3.max, a2.mean, a2.std, a2.max, d.mean, a3.median
         );
     }
+    println!(
+        "(> 1.1x RIO: sessions where the row's mean 3D ATE is more than {WORSE_FACTOR} times {BASELINE}'s)"
+    );
     for ((name, v), (applied, n, nis, handed)) in per.iter().zip(&learned_use) {
         if *n > 0 {
             println!(
@@ -401,7 +435,19 @@ pub fn run(a: ScoreArgs) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use super::unique_labels;
+    use super::{sessions_worse, unique_labels};
+
+    #[test]
+    fn sessions_worse_than_the_baseline_by_more_than_ten_percent() {
+        let base = [(1.0, 0.0, 0.0), (0.5, 0.0, 0.0), (0.8, 0.0, 0.0)];
+        // 1.09x, 1.2x, 0.625x: only the second is more than 10% worse.
+        let row = [(1.09, 9.0, 9.0), (0.6, 0.0, 0.0), (0.5, 0.0, 0.0)];
+        assert_eq!(sessions_worse(&row, &base), 1);
+        assert_eq!(sessions_worse(&base, &base), 0, "the baseline against itself");
+        // Session by session, not by the mean: the same values in another order.
+        let shuffled = [(0.5, 0.0, 0.0), (0.6, 0.0, 0.0), (1.09, 0.0, 0.0)];
+        assert_eq!(sessions_worse(&shuffled, &base), 2);
+    }
     use std::path::PathBuf;
 
     #[test]

@@ -1,5 +1,6 @@
 //! `milliego score --json`: every estimator's per-session figures come with the set's summary,
-//! in the order of `session_names`, and the summary is made of them.
+//! in the order of `session_names`, and the summary (mean, max, median, sessions worse than
+//! Doppler RIO's) is made of them.
 
 use std::process::Command;
 
@@ -52,6 +53,29 @@ fn score_json_reports_every_session_of_every_estimator() {
             close(row["ate_3d_max_m"].as_f64().unwrap(), max),
             "{name}: {row}"
         );
+        let mut sorted = ate.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = (sorted[0] + sorted[1]) / 2.0;
+        assert!(
+            close(row["ate_3d_median_m"].as_f64().unwrap(), median),
+            "{name}: {row}"
+        );
+        // Session by session against Doppler RIO's; the baseline row itself has none.
+        let worse = &row["sessions_worse_than_doppler"];
+        if name == "Doppler RIO" {
+            assert!(worse.is_null(), "{row}");
+        } else {
+            let base = &rows["Doppler RIO"]["per_session"];
+            let expect = each
+                .iter()
+                .zip(base.as_array().unwrap())
+                .filter(|(s, b)| {
+                    s["ate_3d_mean_m"].as_f64().unwrap()
+                        > 1.1 * b["ate_3d_mean_m"].as_f64().unwrap()
+                })
+                .count();
+            assert_eq!(worse.as_u64(), Some(expect as u64), "{name}: {row}");
+        }
         for s in each {
             assert!(s["ate_2d_mean_m"].as_f64().is_some_and(f64::is_finite));
             assert!(s["drift_pct"].as_f64().is_some());
