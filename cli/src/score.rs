@@ -443,7 +443,11 @@ mod tests {
         // 1.09x, 1.2x, 0.625x: only the second is more than 10% worse.
         let row = [(1.09, 9.0, 9.0), (0.6, 0.0, 0.0), (0.5, 0.0, 0.0)];
         assert_eq!(sessions_worse(&row, &base), 1);
-        assert_eq!(sessions_worse(&base, &base), 0, "the baseline against itself");
+        assert_eq!(
+            sessions_worse(&base, &base),
+            0,
+            "the baseline against itself"
+        );
         // Session by session, not by the mean: the same values in another order.
         let shuffled = [(0.5, 0.0, 0.0), (0.6, 0.0, 0.0), (1.09, 0.0, 0.0)];
         assert_eq!(sessions_worse(&shuffled, &base), 2);
