@@ -146,11 +146,14 @@ proptest! {
         bytes[i] ^= x;
         bytes.extend(&wb);
         let (ok, bad, d) = deframe(&bytes, 7);
-        // A damaged byte that became 0x00 splits the frame in two bad pieces.
+        // A damaged byte that became 0x00 splits the frame in two bad pieces (or, the first
+        // byte, into an empty frame and one bad piece).
         prop_assert!(!bad.is_empty() && bad.len() <= 2, "{:?}", bad);
         prop_assert_eq!(ok, vec![b]);
         let c = d.counters();
-        prop_assert_eq!(c.bytes_dropped, wa.len() as u64);
+        // Every byte of the damaged frame is counted: dropped, or as an empty frame.
+        prop_assert!(c.empty_frames <= u64::from(i == 0));
+        prop_assert_eq!(c.bytes_dropped + c.empty_frames, wa.len() as u64);
     }
 
     #[test]
@@ -178,6 +181,33 @@ fn body_parts_are_concatenated() {
         two.push(b)
     });
     assert_eq!(one, two);
+}
+
+#[test]
+fn a_first_byte_damaged_into_a_delimiter_is_an_empty_frame_and_the_rest_is_dropped() {
+    let h = Header {
+        seq: 7,
+        t_ns: 3,
+        ..Header::default()
+    };
+    let a = wire(&Message::Radar {
+        header: h,
+        bytes: b"payload",
+    });
+    let b = Message::Imu {
+        header: h,
+        bytes: &[0xFA, 0xFF],
+    };
+    let mut bytes = a.clone();
+    // The COBS code byte, never 0 on the wire, turned into a delimiter.
+    assert_ne!(bytes[0], 0);
+    bytes[0] = 0;
+    bytes.extend(wire(&b));
+    let (ok, bad, d) = deframe(&bytes, 3);
+    assert_eq!(ok, vec![own(&b)]);
+    assert_eq!(bad.len(), 1, "{bad:?}");
+    let c = d.counters();
+    assert_eq!((c.empty_frames, c.bytes_dropped), (1, a.len() as u64 - 1));
 }
 
 #[test]
