@@ -144,8 +144,8 @@ pub fn run(a: RecordArgs) -> Result<(), Box<dyn std::error::Error>> {
             )
         });
         eprintln!(
-            "hub link ({}): {} B, {} messages, {} bad frames ({} B dropped), {} missing by sequence, {} restarts, {} stamps clamped; {health}",
-            h.port, h.link_bytes, h.messages, h.bad_frames, h.bytes_dropped, h.seq_gaps, h.restarts, h.stamps_clamped
+            "hub link ({}): {} B, {} messages, {} bad frames ({} B dropped), {} lone delimiters, {} missing by sequence, {} restarts, {} stamps clamped; {health}",
+            h.port, h.link_bytes, h.messages, h.bad_frames, h.bytes_dropped, h.empty_frames, h.seq_gaps, h.restarts, h.stamps_clamped
         );
     }
     Ok(())

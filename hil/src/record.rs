@@ -197,6 +197,9 @@ pub struct HubRecord {
     pub bad_frames: u64,
     /// Bytes of those frames and of partial ones \[B\].
     pub bytes_dropped: u64,
+    /// Lone delimiters (0x00 with no frame before it: a sender's flush, or a frame's first byte
+    /// damaged into a delimiter, whose other bytes are then in `bytes_dropped`) \[B\].
+    pub empty_frames: u64,
     /// Messages missing by the link's sequence numbers (dropped by the hub for backpressure, or
     /// destroyed on the way).
     pub seq_gaps: u64,
@@ -737,6 +740,7 @@ fn hub_read_loop<P: io::Read>(
     rec.messages = c.messages_ok;
     rec.bad_frames = c.frames_bad_cobs + c.frames_bad_message + c.frames_overflow;
     rec.bytes_dropped = c.bytes_dropped;
+    rec.empty_frames = c.empty_frames;
     ReaderEnd {
         port,
         error,

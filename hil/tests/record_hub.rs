@@ -105,7 +105,10 @@ fn recording_through_the_hub_keeps_each_frame_on_the_hub_clock_and_counts_the_da
     // The host reads the link in pieces that have nothing to do with the hub's stamps: 37-byte
     // writes with pauses that do not follow hub time.
     thread::sleep(Duration::from_millis(200));
-    let bytes: Vec<u8> = wire.concat();
+    // A lone delimiter after the first message (a sender's flush): counted, nothing else.
+    let mut bytes: Vec<u8> = wire[0].clone();
+    bytes.push(0);
+    bytes.extend(wire[1..].concat());
     for (i, c) in bytes.chunks(37).enumerate() {
         master.write_all(c).unwrap();
         if i % 9 == 0 {
@@ -149,6 +152,7 @@ fn recording_through_the_hub_keeps_each_frame_on_the_hub_clock_and_counts_the_da
     let h = report.hub.expect("a hub record");
     assert_eq!(h.link_bytes, bytes.len() as u64);
     assert_eq!(h.bad_frames, 1, "the corrupted message");
+    assert_eq!(h.empty_frames, 1, "the flush");
     assert_eq!(h.seq_gaps, 2, "the corrupted and the dropped message");
     assert_eq!(h.restarts, 0);
     assert_eq!(h.stamps_clamped, 0);
