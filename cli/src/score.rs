@@ -359,13 +359,12 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         let pick = |f: fn(&SessionScore) -> f64| Stats::of(&v.iter().map(f).collect::<Vec<_>>());
         (pick(|x| x.0), pick(|x| x.1), pick(|x| x.2))
     };
-    let base = per
+    let base: &[SessionScore] = per
         .iter()
         .find(|(n, _)| n == BASELINE)
-        .map(|(_, v)| v.clone())
-        .unwrap_or_default();
+        .map_or(&[], |(_, v)| v.as_slice());
     // Sessions worse than the baseline, for every other row.
-    let worse = |n: &str, v: &[SessionScore]| (n != BASELINE).then(|| sessions_worse(v, &base));
+    let worse = |n: &str, v: &[SessionScore]| (n != BASELINE).then(|| sessions_worse(v, base));
     if a.json {
         let rows: serde_json::Map<String, serde_json::Value> = per
             .iter()
@@ -436,6 +435,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::{sessions_worse, unique_labels};
+    use std::path::PathBuf;
 
     #[test]
     fn sessions_worse_than_the_baseline_by_more_than_ten_percent() {
@@ -452,7 +452,6 @@ mod tests {
         let shuffled = [(0.5, 0.0, 0.0), (0.6, 0.0, 0.0), (1.09, 0.0, 0.0)];
         assert_eq!(sessions_worse(&shuffled, &base), 2);
     }
-    use std::path::PathBuf;
 
     #[test]
     fn models_that_share_a_label_are_told_apart_by_their_file() {
