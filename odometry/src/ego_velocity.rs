@@ -219,7 +219,8 @@ pub struct EgoVelocityEstimator {
     cfg: Config,
     dirs: Vec<Vector3<f64>>,
     vr: Vec<f64>,
-    voter: Vec<bool>,
+    // Voting weight of each usable point (0: does not vote).
+    weight: Vec<f64>,
     idx: Vec<usize>,
     inl: Vec<usize>,
     inlier_dirs: Vec<Vector3<f64>>,
@@ -238,7 +239,7 @@ impl EgoVelocityEstimator {
             cfg,
             dirs: Vec::with_capacity(points),
             vr: Vec::with_capacity(points),
-            voter: Vec::with_capacity(points),
+            weight: Vec::with_capacity(points),
             idx: Vec::with_capacity(points),
             inl: Vec::with_capacity(points),
             inlier_dirs: Vec::with_capacity(points),
@@ -280,12 +281,28 @@ impl EgoVelocityEstimator {
         prior: Option<Prior>,
         out: &mut Estimate,
     ) {
+        self.estimate_weighted_into(detections, None, prior, out);
+    }
+
+    /// [`EgoVelocityEstimator::estimate_guided_into`] with a voting weight per detection
+    /// (`weights[i]` for `detections[i]`, in \[0, 1\]; missing or non-finite ones count 1): the
+    /// consensus is the hypothesis whose inliers weigh most, so points the caller trusts more
+    /// (a static reflector seen again where the motion carried it, [`crate::persist`]) outvote
+    /// those it trusts less. The weights only choose the consensus: the inlier count the
+    /// settings require, the least squares and the covariance are those of the plain estimate.
+    pub fn estimate_weighted_into(
+        &mut self,
+        detections: &[Detection],
+        weights: Option<&[f32]>,
+        prior: Option<Prior>,
+        out: &mut Estimate,
+    ) {
         let cfg = self.cfg;
         let zero_gate = cfg.inlier_threshold();
         let mut near_field = 0;
         self.dirs.clear();
         self.vr.clear();
-        self.voter.clear();
+        self.weight.clear();
         self.idx.clear();
         for (i, d) in detections.iter().enumerate() {
             let p = Vector3::new(
@@ -299,7 +316,12 @@ impl EgoVelocityEstimator {
             }
             let leak = r < f64::from(cfg.near_field_m) && d.radial_velocity.abs() <= zero_gate;
             near_field += usize::from(leak);
-            self.voter.push(!leak);
+            let w = weights
+                .and_then(|w| w.get(i))
+                .map(|&w| f64::from(w))
+                .filter(|w| w.is_finite())
+                .map_or(1.0, |w| w.clamp(0.0, 1.0));
+            self.weight.push(if leak { 0.0 } else { w });
             let mut u = p / r;
             if cfg.model == Model::Planar {
                 u.z = 0.0;
@@ -351,7 +373,8 @@ impl EgoVelocityEstimator {
         let thresh_for = |_v: &Vector3<f64>| thresh;
         let sigma_eff = |v: &Vector3<f64>| (s0 * s0 + (v.norm() * sd).powi(2)).sqrt();
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-        let mut best: Option<(usize, f64, Vector3<f64>)> = None;
+        // (voting inliers, their weight, truncated cost, hypothesis)
+        let mut best: Option<(usize, f64, f64, Vector3<f64>)> = None;
         // A hypothesis from a minimal sample is itself uncertain by about the inlier threshold.
         let prior = prior.and_then(|p| {
             let c = Matrix3::from_fn(|r, k| p.covariance[r][k])
@@ -369,12 +392,22 @@ impl EgoVelocityEstimator {
             if cfg.model == Model::Planar {
                 v.z = 0.0;
             }
-            let (count, cost) = score(&self.dirs, &self.vr, &self.voter, &v, thresh_for(&v));
-            best = Some((count, cost, v));
+            let (count, weight, cost) =
+                score(&self.dirs, &self.vr, &self.weight, &v, thresh_for(&v));
+            best = Some((count, weight, cost, v));
         }
         let mut max_iter = cfg.max_iterations;
         let mut it = 0;
         let mut sample = [0usize; 3];
+        // Samples are drawn uniformly; the stop rule counts the inliers' share of the points'
+        // weights (a non-voter, weight 0, as 1), so a heavy consensus among light points (seen
+        // once) does not stop the search before the all-inlier sample of a consensus of points
+        // seen again came up. Unweighted, the share is inliers / usable.
+        let total_mass: f64 = self
+            .weight
+            .iter()
+            .map(|&w| if w > 0.0 { w } else { 1.0 })
+            .sum();
         while it < max_iter {
             it += 1;
             for k in 0..dof {
@@ -397,14 +430,15 @@ impl EgoVelocityEstimator {
             if !agrees(&v) {
                 continue;
             }
-            let (count, cost) = score(&self.dirs, &self.vr, &self.voter, &v, thresh_for(&v));
+            let (count, weight, cost) =
+                score(&self.dirs, &self.vr, &self.weight, &v, thresh_for(&v));
             if best
                 .as_ref()
-                .is_none_or(|b| count > b.0 || (count == b.0 && cost < b.1))
+                .is_none_or(|b| weight > b.1 || (weight == b.1 && cost < b.2))
             {
-                best = Some((count, cost, v));
+                best = Some((count, weight, cost, v));
                 // Adaptive stop: iterations for `confidence` with the current inlier share.
-                let w = count as f64 / usable as f64;
+                let w = weight / total_mass;
                 let p_good = w.powi(dof as i32);
                 if p_good > 0.0 && p_good < 1.0 {
                     let n = (1.0 - f64::from(cfg.confidence)).ln() / (1.0 - p_good).ln();
@@ -419,7 +453,7 @@ impl EgoVelocityEstimator {
             .min_inliers
             .max((cfg.min_inlier_share * usable as f32).ceil() as usize)
             .max(dof);
-        let Some((count, _, v0)) = best else {
+        let Some((count, _, _, v0)) = best else {
             est.status = Status::NoConsensus {
                 best_inliers: 0,
                 need: need_inliers,
@@ -534,30 +568,32 @@ fn solve(
     v.iter().all(|x| x.is_finite()).then_some(v)
 }
 
-/// Inlier count and truncated squared cost of a hypothesis.
-/// Only voters count (see [`Config::near_field_m`]).
+/// Inlier count, inlier weight and truncated squared cost of a hypothesis.
+/// Only voters (weight above 0) count (see [`Config::near_field_m`]).
 fn score(
     dirs: &[Vector3<f64>],
     vr: &[f64],
-    voter: &[bool],
+    weight: &[f64],
     v: &Vector3<f64>,
     thresh: f64,
-) -> (usize, f64) {
+) -> (usize, f64, f64) {
     let mut count = 0;
+    let mut sum = 0.0;
     let mut cost = 0.0;
-    for ((d, r), &votes) in dirs.iter().zip(vr).zip(voter) {
-        if !votes {
+    for ((d, r), &w) in dirs.iter().zip(vr).zip(weight) {
+        if w <= 0.0 {
             continue;
         }
         let e = (r + d.dot(v)).abs();
         if e <= thresh {
             count += 1;
+            sum += w;
             cost += e * e;
         } else {
             cost += thresh * thresh;
         }
     }
-    (count, cost)
+    (count, sum, cost)
 }
 
 /// The direction the points constrain least, and its normalised spread.

@@ -1,7 +1,9 @@
 //! Ego-velocity on synthetic frames with known motion: accuracy within the noise budget under
 //! 50-80% outliers, covariance consistency, and every degenerate case reported.
 
-use milliego_odometry::ego_velocity::{Config, Detection, EgoVelocityEstimator, Model, Status};
+use milliego_odometry::ego_velocity::{
+    Config, Detection, EgoVelocityEstimator, Estimate, Model, Status,
+};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -261,4 +263,48 @@ fn a_prior_picks_the_static_world_over_a_larger_coherent_ghost_set() {
         guided.velocity
     );
     assert_eq!(guided.inlier_mask[..12].iter().filter(|m| **m).count(), 12);
+}
+
+#[test]
+fn weights_pick_the_points_seen_again_over_a_larger_set_seen_once() {
+    // 8 static points (seen again: weight 1) and 14 ghosts coherent with another velocity (seen
+    // once: weight 0.25). Unweighted, the ghosts win; weighted, the world does.
+    let mut rng = ChaCha8Rng::seed_from_u64(78);
+    let v = [0.2, 1.1, 0.0];
+    let ghost_v = [-0.9, 0.3, 0.1];
+    let (mut dets, _) = frame(&mut rng, v, 8, 0.0, 45.0);
+    let (ghosts, _) = frame(&mut rng, ghost_v, 14, 0.0, 45.0);
+    dets.extend(ghosts);
+    let mut weights = vec![1.0f32; 8];
+    weights.extend([0.25f32; 14]);
+    let mut est = EgoVelocityEstimator::new(cfg());
+    let mut out = Estimate::with_capacity(dets.len());
+    est.estimate_weighted_into(&dets, None, None, &mut out);
+    assert!(
+        (f64::from(out.velocity[0]) - ghost_v[0]).abs() < 0.1,
+        "unweighted follows the larger set: {:?}",
+        out.velocity
+    );
+    est.estimate_weighted_into(&dets, Some(&weights), None, &mut out);
+    assert!(out.is_ok(), "{:?}", out.status);
+    for (got, want) in out.velocity.iter().zip(v) {
+        assert!(
+            (f64::from(*got) - want).abs() < 0.2,
+            "weighted: {:?}",
+            out.velocity
+        );
+    }
+    // Every static point, and at most a ghost that happens to fit (this seed has one).
+    assert!((8..=9).contains(&out.inliers), "{}", out.inliers);
+    assert!(out.inlier_mask[..8].iter().all(|m| *m));
+    // Equal weights change nothing.
+    let ones = vec![1.0f32; dets.len()];
+    let plain = est.estimate(&dets);
+    est.estimate_weighted_into(&dets, Some(&ones), None, &mut out);
+    assert_eq!(out, plain);
+    // Missing (a short slice) and non-finite weights count 1.
+    let mut odd = weights.clone();
+    odd[8] = f32::NAN;
+    est.estimate_weighted_into(&dets, Some(&odd[..20]), None, &mut out);
+    assert!(out.is_ok());
 }
