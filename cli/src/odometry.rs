@@ -82,6 +82,12 @@ pub struct OdometryArgs {
     /// validation sets, not the fused estimators).
     #[arg(long)]
     stack_window: Option<f64>,
+    /// How far back a radar point counts as seen again \[s\]: points a static reflector gave in
+    /// the frames before weigh more in the ego-velocity consensus than points seen once (clutter,
+    /// multipath). Default 0: off; 0.15 is the measured setting (docs/odometry.md, "Points seen
+    /// again")
+    #[arg(long, value_name = "SECONDS")]
+    persist_window: Option<f64>,
 }
 
 fn parse_time_offset(s: &str) -> std::result::Result<TimeOffsetMode, String> {
@@ -128,6 +134,9 @@ pub fn run(a: OdometryArgs) -> Result<()> {
         cfg = cfg.ground_vehicle();
     }
     cfg.radar_time_shift_s = a.radar_time_shift;
+    if let Some(w) = a.persist_window {
+        cfg.persist.window_s = w.max(0.0);
+    }
     if let Some(w) = a.stack_window {
         cfg.stack_window_s = w.max(0.0);
     }
@@ -142,6 +151,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
             "session": a.session.display().to_string(), "estimator": format!("{:?}", a.estimator).to_lowercase(),
             "poses": r.trajectory.len(), "radar_frames": r.radar_frames, "imu_samples": r.imu_samples,
             "ego_velocity": {"ok": r.ego_ok, "degenerate": r.ego_degenerate, "too_few_points": r.ego_too_few, "no_consensus": r.ego_no_consensus, "stacked": r.ego_stacked},
+            "points_seen_again": {"frames": r.persist.frames, "seen_again": r.persist.seen_again, "fresh": r.persist.fresh},
             "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "vertical_bounds": r.vertical_bounds, "horizontal_bounds": r.horizontal_bounds, "nis_mean": r.nis_mean},
             "barometer": if r.pressure_readings == 0 { json!("none in the session: height from radar and IMU only") } else if a.no_barometer { json!(format!("{} readings ignored (--no-barometer)", r.pressure_readings)) } else { json!({"readings": r.pressure_readings, "updates": r.baro_updates, "rejected": r.baro_rejected, "reanchors": r.baro_reanchors}) },
             "doppler_step": doppler_step_json(r.doppler_step, a.doppler_step.is_some()),

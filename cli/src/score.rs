@@ -103,6 +103,14 @@ pub struct ScoreArgs {
     /// interval: on or off (default: the shipped setting).
     #[arg(long, value_name = "on|off")]
     learned_scale: Option<String>,
+    /// Calibrate the network's velocity offset online against the filter where the radar covers
+    /// an interval: on or off (default: the shipped setting, docs/model.md "Fusion").
+    #[arg(long, value_name = "on|off")]
+    learned_offset: Option<String>,
+    /// How far back a radar point counts as seen again in the ego-velocity consensus \[s\]
+    /// (default: the shipped setting, off; docs/odometry.md "Points seen again")
+    #[arg(long, value_name = "S")]
+    persist_window: Option<f64>,
     /// How long a radar frame that gives no velocity alone is kept for the next ones \[s\]
     /// (default: the shipped setting, docs/odometry.md; 0: off).
     #[arg(long, value_name = "S")]
@@ -278,6 +286,13 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             o => return Err(format!("--learned-scale: {o:?} is neither on nor off").into()),
         };
     }
+    if let Some(v) = &a.learned_offset {
+        learned.calibrate_offset = match v.as_str() {
+            "on" => true,
+            "off" => false,
+            o => return Err(format!("--learned-offset: {o:?} is neither on nor off").into()),
+        };
+    }
     if let Some(n) = a.learned_doppler_covers {
         learned.doppler_covers = n;
     }
@@ -290,6 +305,9 @@ pub fn run(a: ScoreArgs) -> Result<()> {
     };
     if let Some(w) = a.stack_window {
         classical.stack_window_s = w.max(0.0);
+    }
+    if let Some(w) = a.persist_window {
+        classical.persist.window_s = w.max(0.0);
     }
     // Per runtime column: learned measurements applied, evaluated, NIS sum; sessions handed over.
     let mut learned_use: Vec<(u64, u64, f64, usize)> = vec![(0, 0, 0.0, 0); estimators.len()];
@@ -324,6 +342,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
                     let cfg = OfflineConfig {
                         estimator: *est,
                         stack_window_s: classical.stack_window_s,
+                        persist: classical.persist,
                         ..OfflineConfig::default()
                     };
                     // What the rig's operator knows and says (`odometry --vehicle`): a car.

@@ -9,6 +9,8 @@
 //!   updates, bias estimation, chi-square gating).
 //! * [`learned`]: the learned model's relative motion as a filter measurement, and the online
 //!   consistency check that decides whether it is applied.
+//! * [`persist`]: which radar points were seen again in the last frames (a static reflector is, a
+//!   false alarm is not): their weights in the ego-velocity consensus.
 //! * [`rest`]: rest detection from the IMU and the radar's Doppler together, and the zero-velocity
 //!   / zero-rate updates taken at rest.
 //! * [`runner`]: the streaming loop over both (levelling, priors, the health rule, updates, IMU
@@ -23,6 +25,7 @@ pub mod ego_velocity;
 pub mod lattice;
 pub mod learned;
 pub mod offline;
+pub mod persist;
 pub mod rest;
 pub mod rio;
 pub mod runner;

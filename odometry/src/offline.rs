@@ -52,6 +52,8 @@ pub struct OfflineConfig {
     /// How long a frame that gave no velocity alone is kept for the next ones \[s\]
     /// ([`ClassicalConfig::stack_window_s`]; 0: off).
     pub stack_window_s: f64,
+    /// Consensus weights from point persistence ([`ClassicalConfig::persist`]).
+    pub persist: crate::persist::PersistConfig,
     /// The IMU's noise preset ([`RioConfig::with_imu_noise`]); `None`: the one the session's IMU
     /// device names ([`ImuNoise::from_device`]), or `rio` as given when it names none.
     pub imu_noise: Option<ImuNoise>,
@@ -141,6 +143,7 @@ impl Default for OfflineConfig {
             radar_time_shift_s: 0.0,
             time_offset: TimeOffsetMode::Auto,
             stack_window_s: c.stack_window_s,
+            persist: c.persist,
             imu_noise: None,
         }
     }
@@ -168,6 +171,8 @@ pub struct OfflineResult {
     /// Of the frames without a velocity alone, those that gave one with the points of the frames
     /// before them ([`crate::runner::ClassicalConfig::stack_window_s`]).
     pub ego_stacked: usize,
+    /// Radar points weighed by whether they were seen again ([`crate::persist`]).
+    pub persist: crate::persist::PersistCounters,
     /// Filter updates applied and gated.
     pub updates: u64,
     /// Filter updates rejected by the gate.
@@ -314,6 +319,7 @@ pub fn run_with_motions(
             imu_gap_s: f64::INFINITY,
             learned,
             stack_window_s: cfg.stack_window_s,
+            persist: cfg.persist,
         },
         cfg.estimator == Estimator::Doppler,
     );
@@ -383,6 +389,7 @@ pub fn run_with_motions(
         ego_too_few: n(c.ego_too_few),
         ego_no_consensus: n(c.ego_no_consensus),
         ego_stacked: n(c.ego_stacked),
+        persist: *runner.persist_counters(),
         updates: filter.updates,
         gated: filter.gated,
         rest_samples: c.rest_samples,

@@ -39,6 +39,7 @@ use crate::learned::{
     LearnedConfig, LearnedCounters, Monitor, Outcome, RelativeMotion, ScaleCalibration,
     SCALE_COVERS,
 };
+use crate::persist::{radar_pose, PersistConfig, PointHistory};
 use crate::rest::{RestConfig, RestDetector, Verdict};
 use crate::rio::{RadarMount, Rio, RioConfig, RioCounters, VelocityMeasurement};
 use crate::strapdown::{ImuSample, NavState};
@@ -159,6 +160,9 @@ pub struct ClassicalConfig {
     /// helps the Doppler filter on the validation and training sets but makes `auto` and fused
     /// worse on v1's validation set and on unseen seeds (docs/odometry.md).
     pub stack_window_s: f64,
+    /// Points seen again weigh more in the ego-velocity consensus than points seen once
+    /// ([`crate::persist`]).
+    pub persist: PersistConfig,
 }
 
 impl Default for ClassicalConfig {
@@ -173,6 +177,7 @@ impl Default for ClassicalConfig {
             imu_gap_s: 0.1,
             learned: LearnedConfig::default(),
             stack_window_s: 0.0,
+            persist: PersistConfig::default(),
         }
     }
 }
@@ -265,6 +270,8 @@ struct Stacked {
 struct Before {
     prior: ([f64; 3], [[f64; 3]; 3]),
     updates: u64,
+    // The state there (where the frame's points are placed, [`crate::persist`]).
+    nav: NavState,
 }
 
 /// Doppler radar-inertial odometry (or, without radar, IMU dead reckoning) over a stream.
@@ -315,6 +322,8 @@ pub struct Runner {
     monitor: Monitor,
     learned: LearnedCounters,
     scale: ScaleCalibration,
+    // Recent frames' points in the world frame, for the consensus weights.
+    history: PointHistory,
 }
 
 impl Runner {
@@ -370,7 +379,13 @@ impl Runner {
             monitor: Monitor::new(cfg.learned),
             learned: LearnedCounters::default(),
             scale: ScaleCalibration::default(),
+            history: PointHistory::new(cfg.persist),
         }
+    }
+
+    /// What the persistence weighting did ([`crate::persist`]).
+    pub fn persist_counters(&self) -> &crate::persist::PersistCounters {
+        self.history.counters()
     }
 
     /// Whether radar frames update the filter (Doppler) or only mark pose times (IMU only).
@@ -471,6 +486,7 @@ impl Runner {
         self.before = Some(Before {
             prior: rio.predicted_radar_velocity(),
             updates: health_updates(rio.counters()),
+            nav: *rio.state(),
         });
         self.filter_imu(s);
         while let Some(&(id, t)) = self.waiting.front() {
@@ -609,17 +625,29 @@ impl Runner {
         }
         let r_from = from.rotation.to_rotation_matrix().into_inner();
         let moved = to.translation.vector - from.translation.vector;
-        let d = if c.calibrate_scale {
-            // The factor learned from earlier intervals; then this one joins it if the radar
-            // covered it.
-            let k = self.scale.scale();
-            if u_to.saturating_sub(u_from) >= SCALE_COVERS {
-                self.scale.push(&d, &(r_from.transpose() * moved));
-            }
-            d * k
+        // The filter's own displacement over the interval, in the body frame at `from`.
+        let f = r_from.transpose() * moved;
+        let k = if c.calibrate_scale {
+            self.scale.scale()
         } else {
-            d
+            1.0
         };
+        let offset = if c.calibrate_offset {
+            self.scale.offset()
+        } else {
+            Vector3::zeros()
+        };
+        // The calibration learned from earlier intervals applies; then this one joins it if the
+        // radar covered it.
+        if u_to.saturating_sub(u_from) >= SCALE_COVERS {
+            if c.calibrate_offset {
+                self.scale.push_offset(&((d * k - f) / dt));
+            }
+            if c.calibrate_scale {
+                self.scale.push(&d, &f);
+            }
+        }
+        let d = d * k - offset * dt;
         let v_learned = r_from * d / dt;
         let v_filter = moved / dt;
         let y = v_learned - v_filter;
@@ -770,15 +798,19 @@ impl Runner {
         }
     }
 
-    /// The ego-velocity of `dets` guided by `prior` (status counted).
+    /// The ego-velocity of `dets` guided by `prior` (status counted); with the radar's pose
+    /// `radar_in_world`, the points seen again weigh more ([`crate::persist`]).
     fn measure(
         &mut self,
         t: f64,
         dets: &[Detection],
         prior: Option<Prior>,
+        radar_in_world: Option<Isometry3<f64>>,
     ) -> Option<VelocityMeasurement> {
         self.learn_doppler_step(dets);
-        self.ego.estimate_guided_into(dets, prior, &mut self.est);
+        let weights = radar_in_world.and_then(|pose| self.history.weigh(t, &pose, dets));
+        self.ego
+            .estimate_weighted_into(dets, weights, prior, &mut self.est);
         match self.est.status {
             Status::Ok => {
                 self.counters.ego_ok += 1;
@@ -822,7 +854,18 @@ impl Runner {
             gate,
         });
         let guided_now = prior.is_some();
-        let m = self.measure(t, dets, prior);
+        // The radar's pose at the frame: the filter's state at the last sample before it (as the
+        // prior), carried to the frame's time; the same in both input orders.
+        let nav = if behind {
+            self.before.map(|b| b.nav)
+        } else {
+            self.rio.as_ref().map(|r| *r.state())
+        };
+        let pose = nav.map(|st| {
+            let p = st.p + st.v * (t - st.t);
+            radar_pose(&st.q, &p, &self.mount.rotation, &self.mount.translation)
+        });
+        let m = self.measure(t, dets, prior, pose);
         let no_consensus = matches!(self.est.status, Status::NoConsensus { .. });
         let near_field = self.est.near_field;
         // The radar's verdict on rest: its own estimate (before the filter takes it) and the
@@ -1028,13 +1071,15 @@ impl Runner {
     /// No IMU: hold the attitude, integrate the radar velocity to `t` \[s\].
     fn dead_reckon(&mut self, t: f64) {
         self.clear_stack();
+        self.history.clear();
         let Some(rio) = self.rio.as_ref() else {
             return;
         };
         let mut st = self.dr.unwrap_or(*rio.state());
         if self.use_radar {
             let dets = std::mem::take(&mut self.dets);
-            let m = self.measure(t, &dets, None);
+            // No pose to place the points with: no weights.
+            let m = self.measure(t, &dets, None, None);
             self.dets = dets;
             if let Some(m) = m {
                 // The radar's own velocity in its frame (lever arm neglected without gyro).

@@ -156,7 +156,20 @@ fn rejected_frames_withdraw_the_prior_and_the_filter_re_anchors() {
 
 #[test]
 fn offline_and_runtime_order_give_the_same_poses() {
-    let cfg = ClassicalConfig::default();
+    same_poses_in_both_orders(&ClassicalConfig::default());
+}
+
+#[test]
+fn offline_and_runtime_order_give_the_same_poses_with_points_seen_again_weighed() {
+    // The frames' points are placed with the state at the sample before each frame in both
+    // orders, so their weights, and the poses, are the same.
+    let mut cfg = ClassicalConfig::default();
+    cfg.persist.window_s = 0.15;
+    same_poses_in_both_orders(&cfg);
+}
+
+fn same_poses_in_both_orders(cfg: &ClassicalConfig) {
+    let cfg = *cfg;
     let points = |n: usize| scene([0.0, 0.2 * (n as f32 * 0.1).sin(), 0.0]);
     let runtime = feed(&mut Runner::new(&cfg, true), 4.0, points, |_, _| {});
     // Offline order: each frame before the first sample at or past it.
