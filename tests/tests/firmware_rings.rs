@@ -122,7 +122,10 @@ fn an_interrupt_and_a_main_loop_on_two_threads_lose_and_reorder_nothing() {
     let mut order_ok = true;
     loop {
         let finished = done.load(Ordering::Acquire);
-        let n = ring.readable().len();
+        // One look at the readable bytes: a second `readable()` may hold more (the producer runs
+        // on), and checking those while consuming only the first look's would see them again.
+        let readable = ring.readable();
+        let n = readable.len();
         if n == 0 {
             if finished && ring.readable().is_empty() {
                 break;
@@ -130,7 +133,7 @@ fn an_interrupt_and_a_main_loop_on_two_threads_lose_and_reorder_nothing() {
             std::hint::spin_loop();
             continue;
         }
-        for &b in ring.readable() {
+        for &b in readable {
             // Without refusals each byte follows its predecessor; with them it is later in the
             // stream, never a byte from the past or a torn slot (checked by the count below).
             if refused.load(Ordering::Relaxed) == 0 {
