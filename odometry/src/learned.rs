@@ -66,10 +66,9 @@ pub struct LearnedConfig {
     /// measurement. The network's errors are not white: on a held-out walk their correlation
     /// between consecutive intervals was 0.4-0.9 per axis, which a filter taking each
     /// measurement as independent cannot know; where the radar sees the motion, the part that
-    /// persists is measured and removed, and where it does not, the last value holds. Off by
-    /// default: it also absorbs a wrong axis convention (reversed motions read as a steady
-    /// offset while the walk is steady), which the online check then no longer sees
-    /// (docs/model.md, "Fusion").
+    /// persists is measured and removed, and where it does not, the last value holds. The
+    /// online check ([`Monitor`]) judges each measurement before the offset is taken off (it
+    /// would absorb a wrong axis convention too). Off by default (docs/model.md, "Fusion").
     pub calibrate_offset: bool,
 }
 

@@ -647,17 +647,28 @@ impl Runner {
                 self.scale.push(&d, &f);
             }
         }
-        let d = d * k - offset * dt;
-        let v_learned = r_from * d / dt;
         let v_filter = moved / dt;
-        let y = v_learned - v_filter;
+        // The online check judges the network before its offset is taken off: the offset
+        // calibration would otherwise absorb a wrong axis convention (reversed motions read as a
+        // steady offset on a steady walk) and hide it from the check.
+        let raw = d * k;
+        let d = raw - offset * dt;
+        let y = r_from * d / dt - v_filter;
         let s = c.deviation(&d, m.translation_std) / dt;
         let rm = r_from * Matrix3::from_diagonal(&s.component_mul(&s)) * r_from.transpose();
         let Some(nis) = rio.world_velocity_nis(&y, &rm) else {
             return Outcome::Invalid;
         };
+        let nis_raw = if offset == Vector3::zeros() {
+            nis
+        } else {
+            let s = c.deviation(&raw, m.translation_std) / dt;
+            let rm = r_from * Matrix3::from_diagonal(&s.component_mul(&s)) * r_from.transpose();
+            rio.world_velocity_nis(&(r_from * raw / dt - v_filter), &rm)
+                .unwrap_or(nis)
+        };
         let trusted = self.monitor.trusted();
-        self.learned.switched_off += u64::from(self.monitor.record(nis));
+        self.learned.switched_off += u64::from(self.monitor.record(nis_raw));
         if nis > c.gate {
             return Outcome::Gated(nis);
         }

@@ -164,6 +164,24 @@ fn reversed_motions_fail_the_online_check_and_stop() {
 }
 
 #[test]
+fn reversed_motions_fail_the_online_check_with_the_offset_calibration_on_too() {
+    // Calibrated, reversed motions on a steady walk read as a steady offset of twice the
+    // velocity and agree with the filter once it is taken off; the check judges them before.
+    let (_d, s) = simulated(Family::Corridor, MotionKind::Handheld, 5, 20.0);
+    let doppler = run(&s, &OfflineConfig::default()).unwrap();
+    let times: Vec<f64> = doppler.trajectory.iter().map(|p| p.t).collect();
+    let m = motions(&s, &times, -1.0);
+    let on = LearnedConfig {
+        calibrate_offset: true,
+        ..LearnedConfig::default()
+    };
+    let r = with(&s, Estimator::Doppler, &m, on);
+    println!("reversed, offset calibrated: {:?}", r.learned);
+    assert_eq!(r.learned.switched_off, 1, "{:?}", r.learned);
+    assert!(r.learned.suspended > 0, "{:?}", r.learned);
+}
+
+#[test]
 fn at_rest_motions_are_not_applied_and_the_rig_does_not_move() {
     let (_d, s) = simulated(Family::Office, MotionKind::Static, 21, 12.0);
     let doppler = run(&s, &OfflineConfig::default()).unwrap();
