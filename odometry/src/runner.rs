@@ -653,19 +653,21 @@ impl Runner {
         // steady offset on a steady walk) and hide it from the check.
         let raw = d * k;
         let d = raw - offset * dt;
-        let y = r_from * d / dt - v_filter;
-        let s = c.deviation(&d, m.translation_std) / dt;
-        let rm = r_from * Matrix3::from_diagonal(&s.component_mul(&s)) * r_from.transpose();
+        // A translation's innovation (world velocity) and its covariance.
+        let innovation = |d: &Vector3<f64>| {
+            let s = c.deviation(d, m.translation_std) / dt;
+            let rm = r_from * Matrix3::from_diagonal(&s.component_mul(&s)) * r_from.transpose();
+            (r_from * d / dt - v_filter, rm)
+        };
+        let (y, rm) = innovation(&d);
         let Some(nis) = rio.world_velocity_nis(&y, &rm) else {
             return Outcome::Invalid;
         };
         let nis_raw = if offset == Vector3::zeros() {
             nis
         } else {
-            let s = c.deviation(&raw, m.translation_std) / dt;
-            let rm = r_from * Matrix3::from_diagonal(&s.component_mul(&s)) * r_from.transpose();
-            rio.world_velocity_nis(&(r_from * raw / dt - v_filter), &rm)
-                .unwrap_or(nis)
+            let (y_raw, rm_raw) = innovation(&raw);
+            rio.world_velocity_nis(&y_raw, &rm_raw).unwrap_or(nis)
         };
         let trusted = self.monitor.trusted();
         self.learned.switched_off += u64::from(self.monitor.record(nis_raw));
@@ -866,8 +868,11 @@ impl Runner {
         });
         let guided_now = prior.is_some();
         // The radar's pose at the frame: the filter's state at the last sample before it (as the
-        // prior), carried to the frame's time; the same in both input orders.
-        let nav = if behind {
+        // prior), carried to the frame's time; the same in both input orders (needed only for the
+        // weighting).
+        let nav = if !self.cfg.persist.enabled() {
+            None
+        } else if behind {
             self.before.map(|b| b.nav)
         } else {
             self.rio.as_ref().map(|r| *r.state())
