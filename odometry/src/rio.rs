@@ -688,11 +688,18 @@ impl Rio {
     }
 
     /// A scalar measurement: innovation `y`, Jacobian row `h`, variance `r` (Joseph form).
-    /// Returns the normalised innovation square.
+    /// Returns the normalised innovation square. The heading is kept out of the gain as for
+    /// radar updates (unless [`RioConfig::radar_heading`]): the vertical velocity bound and the
+    /// barometer cannot observe it either, and through their correlations with it they turned
+    /// the heading of a far-mounted handheld radar 1-3 deg from the truth in a minute, where the
+    /// gyro alone stayed within 0.7 deg (docs/odometry.md, "Heading comes from the gyro").
     fn scalar_update(&mut self, h: &Vn, y: f64, r: f64) -> f64 {
         let ph = self.p * h;
         let s = h.dot(&ph) + r;
-        let k: Vn = ph / s;
+        let mut k: Vn = ph / s;
+        if !self.cfg.radar_heading {
+            self.keep_heading_out(&mut k);
+        }
         let ikh = Mn::identity() - k * h.transpose();
         self.p = ikh * self.p * ikh.transpose() + k * k.transpose() * r;
         self.p = (self.p + self.p.transpose()) * 0.5;
@@ -1059,13 +1066,8 @@ impl Rio {
     ) {
         let mut k = self.p * h.transpose() * si;
         if keep_heading {
-            // The world vertical in the body frame; project it out of the attitude and gyro-bias
-            // rows of the gain. Any gain is consistent under the Joseph form below.
-            let up = self.nav.state().q.inverse() * Vector3::z();
-            let keep = Matrix3::identity() - up * up.transpose();
-            for at in [6, 12] {
-                let rows = keep * k.fixed_rows::<3>(at);
-                k.fixed_rows_mut::<3>(at).copy_from(&rows);
+            for mut column in k.column_iter_mut() {
+                self.keep_heading_out(&mut column);
             }
         }
         let dx: Vn = k * y;
@@ -1073,6 +1075,23 @@ impl Rio {
         self.p = ikh * self.p * ikh.transpose() + k * rm * k.transpose();
         self.p = (self.p + self.p.transpose()) * 0.5;
         self.inject(&dx);
+    }
+
+    /// Projects the world vertical (in the body frame) out of the attitude and gyro-bias rows of
+    /// one gain column: the correction leaves the world yaw and the gyroscope bias about the
+    /// world vertical alone. Any gain is consistent under the Joseph form.
+    fn keep_heading_out<S>(
+        &self,
+        k: &mut nalgebra::Matrix<f64, nalgebra::Const<N>, nalgebra::U1, S>,
+    ) where
+        S: nalgebra::storage::StorageMut<f64, nalgebra::Const<N>, nalgebra::U1>,
+    {
+        let up = self.nav.state().q.inverse() * Vector3::z();
+        for at in [6, 12] {
+            let along = k.fixed_rows::<3>(at).dot(&up);
+            let rows = k.fixed_rows::<3>(at) - up * along;
+            k.fixed_rows_mut::<3>(at).copy_from(&rows);
+        }
     }
 
     /// Folds an error-state correction into the nominal state.

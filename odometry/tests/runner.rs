@@ -164,7 +164,7 @@ fn offline_and_runtime_order_give_the_same_poses_with_points_seen_again_weighed(
     // The frames' points are placed with the state at the sample before each frame in both
     // orders, so their weights, and the poses, are the same.
     let mut cfg = ClassicalConfig::default();
-    cfg.persist.window_s = 0.15;
+    cfg.persist.window_s = milliego_odometry::persist::RECOMMENDED_WINDOW_S;
     same_poses_in_both_orders(&cfg);
 }
 
