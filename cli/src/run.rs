@@ -88,6 +88,12 @@ pub struct RunArgs {
     /// Radar updates may correct heading (as `odometry --radar-heading`; docs/odometry.md).
     #[arg(long)]
     radar_heading: bool,
+    /// How far back a radar point counts as seen again \[s\]: points seen in the frames before
+    /// weigh more in the ego-velocity consensus (as `odometry --persist-window`; default 0: off;
+    /// 0.125 is the setting chosen on the validation sets, docs/odometry.md "Points seen again").
+    /// The summary's `filter` block counts the points seen again.
+    #[arg(long, value_name = "SECONDS")]
+    persist_window: Option<f64>,
     /// Stop after this many seconds.
     #[arg(long)]
     duration: Option<f64>,
@@ -309,6 +315,9 @@ pub fn run(a: RunArgs) -> Result<()> {
     }
     cfg.imu_noise = a.imu_noise;
     cfg.classical.rio.radar_heading = a.radar_heading;
+    if let Some(w) = a.persist_window {
+        cfg.classical.persist.window_s = w.max(0.0);
+    }
     if let Some(p) = &file.extrinsics.radar {
         cfg.classical.mounting.radar = place(p);
     }

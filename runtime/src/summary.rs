@@ -86,6 +86,16 @@ pub struct FilterSummary {
     pub baro_rejected: u64,
     /// Times the height re-anchored to the barometer after a second of rejections.
     pub baro_reanchors: u64,
+    /// Radar frames whose points were weighed by whether they were seen again (`--persist-window`;
+    /// 0 when that is off).
+    #[serde(default)]
+    pub frames_weighed: u64,
+    /// Points of those frames seen again (an earlier frame's point within the radius; weight 1).
+    #[serde(default)]
+    pub points_seen_again: u64,
+    /// Points of those frames seen for the first time (the lower weight).
+    #[serde(default)]
+    pub points_fresh: u64,
 }
 
 impl From<milliego_odometry::rio::RioCounters> for FilterSummary {
@@ -100,6 +110,7 @@ impl From<milliego_odometry::rio::RioCounters> for FilterSummary {
             baro_updates: c.baro_updates,
             baro_rejected: c.baro_rejected,
             baro_reanchors: c.baro_reanchors,
+            ..FilterSummary::default()
         }
     }
 }

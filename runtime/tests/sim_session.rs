@@ -332,6 +332,44 @@ fn offline_run_reproduces_milliego_odometry_with_a_mems_imu() {
     assert_ne!(m.trajectory, o.trajectory, "the preset reaches the filter");
 }
 
+#[test]
+fn offline_run_reproduces_milliego_odometry_with_points_seen_again_weighed() {
+    // `run --persist-window` and `odometry --persist-window`: the same poses, and the summary
+    // counts the points seen again as `odometry` does.
+    let (d, s) = session(13);
+    let mut cfg = OfflineConfig::default();
+    cfg.persist.window_s = milliego_odometry::persist::RECOMMENDED_WINDOW_S;
+    let summary = runtime_equals_odometry_with(&d, &s, &cfg);
+    let f = summary
+        .report
+        .filter
+        .expect("the Doppler filter's counters");
+    let o = run_offline(&s, &cfg).unwrap().persist;
+    println!("runtime filter {f:?}, offline {o:?}");
+    assert!(f.points_seen_again > 0 && f.points_fresh > 0, "{f:?}");
+    // The same frames, and the runtime's last ones past the last IMU sample (which the offline
+    // runner leaves out, as it leaves out their poses).
+    assert!(
+        (o.frames..=o.frames + 2).contains(&f.frames_weighed),
+        "{f:?} vs {o:?}"
+    );
+    assert!(f.points_seen_again >= o.seen_again && f.points_fresh >= o.fresh);
+    let extra = (f.points_seen_again - o.seen_again) + (f.points_fresh - o.fresh);
+    assert!(
+        extra <= 150,
+        "{extra} points more than offline: {f:?} vs {o:?}"
+    );
+    let off = runtime_equals_odometry(&d, &s)
+        .report
+        .filter
+        .expect("counters");
+    assert_eq!(
+        (off.frames_weighed, off.points_seen_again, off.points_fresh),
+        (0, 0, 0),
+        "off by default"
+    );
+}
+
 fn runtime_equals_odometry(
     d: &tempfile::TempDir,
     s: &Session,
@@ -352,6 +390,7 @@ fn runtime_equals_odometry_with(
         ..RunConfig::default()
     };
     cfg.classical.rio = offline.rio;
+    cfg.classical.persist = offline.persist;
     let input = Input::Session {
         dir: d.path().to_path_buf(),
         realtime: false,

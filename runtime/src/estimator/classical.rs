@@ -65,9 +65,15 @@ impl Estimator for Classical {
     }
 
     fn filter(&self) -> Option<crate::summary::FilterSummary> {
-        self.runner
-            .uses_radar()
-            .then(|| self.runner.filter_counters().into())
+        self.runner.uses_radar().then(|| {
+            let p = self.runner.persist_counters();
+            crate::summary::FilterSummary {
+                frames_weighed: p.frames,
+                points_seen_again: p.seen_again,
+                points_fresh: p.fresh,
+                ..self.runner.filter_counters().into()
+            }
+        })
     }
 
     fn name(&self) -> &'static str {
