@@ -698,7 +698,7 @@ impl Rio {
         let s = h.dot(&ph) + r;
         let mut k: Vn = ph / s;
         if !self.cfg.radar_heading {
-            self.keep_heading_out(&mut k);
+            keep_heading_out(&mut k, &self.up_in_body());
         }
         let ikh = Mn::identity() - k * h.transpose();
         self.p = ikh * self.p * ikh.transpose() + k * k.transpose() * r;
@@ -1066,8 +1066,9 @@ impl Rio {
     ) {
         let mut k = self.p * h.transpose() * si;
         if keep_heading {
+            let up = self.up_in_body();
             for mut column in k.column_iter_mut() {
-                self.keep_heading_out(&mut column);
+                keep_heading_out(&mut column, &up);
             }
         }
         let dx: Vn = k * y;
@@ -1077,21 +1078,9 @@ impl Rio {
         self.inject(&dx);
     }
 
-    /// Projects the world vertical (in the body frame) out of the attitude and gyro-bias rows of
-    /// one gain column: the correction leaves the world yaw and the gyroscope bias about the
-    /// world vertical alone. Any gain is consistent under the Joseph form.
-    fn keep_heading_out<S>(
-        &self,
-        k: &mut nalgebra::Matrix<f64, nalgebra::Const<N>, nalgebra::U1, S>,
-    ) where
-        S: nalgebra::storage::StorageMut<f64, nalgebra::Const<N>, nalgebra::U1>,
-    {
-        let up = self.nav.state().q.inverse() * Vector3::z();
-        for at in [6, 12] {
-            let along = k.fixed_rows::<3>(at).dot(&up);
-            let rows = k.fixed_rows::<3>(at) - up * along;
-            k.fixed_rows_mut::<3>(at).copy_from(&rows);
-        }
+    /// The world vertical in the body frame.
+    fn up_in_body(&self) -> Vector3<f64> {
+        self.nav.state().q.inverse() * Vector3::z()
     }
 
     /// Folds an error-state correction into the nominal state.
@@ -1109,6 +1098,22 @@ impl Rio {
         // Beyond half a second the clock mapping is broken, not offset: held at the bound.
         self.time_offset = (self.time_offset + dx[TD]).clamp(-MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S);
         self.nav.set_state(ns);
+    }
+}
+
+/// Projects the world vertical `up` (in the body frame) out of the attitude and gyro-bias rows
+/// of one gain column: the correction leaves the world yaw and the gyroscope bias about the world
+/// vertical alone. Any gain is consistent under the Joseph form.
+fn keep_heading_out<S>(
+    k: &mut nalgebra::Matrix<f64, nalgebra::Const<N>, nalgebra::U1, S>,
+    up: &Vector3<f64>,
+) where
+    S: nalgebra::storage::StorageMut<f64, nalgebra::Const<N>, nalgebra::U1>,
+{
+    for at in [6, 12] {
+        let along = k.fixed_rows::<3>(at).dot(up);
+        let rows = k.fixed_rows::<3>(at) - up * along;
+        k.fixed_rows_mut::<3>(at).copy_from(&rows);
     }
 }
 
