@@ -26,6 +26,20 @@ fn simulated(
     (dir, session)
 }
 
+/// A simulated session, its Doppler RIO run (default settings) and that run's pose times (where
+/// the learned motions are anchored).
+fn walk(
+    family: Family,
+    motion: MotionKind,
+    seed: u64,
+    s: f64,
+) -> (tempfile::TempDir, Session, OfflineResult, Vec<f64>) {
+    let (dir, session) = simulated(family, motion, seed, s);
+    let doppler = run(&session, &OfflineConfig::default()).unwrap();
+    let times = doppler.trajectory.iter().map(|p| p.t).collect();
+    (dir, session, doppler, times)
+}
+
 fn ate(s: &Session, r: &OfflineResult) -> f64 {
     let gt = Trajectory::from_tum(&s.groundtruth().unwrap().expect("ground truth"));
     evaluate(
@@ -88,9 +102,7 @@ fn with(
 
 #[test]
 fn right_motions_carry_an_imu_without_radar_and_do_not_hurt_doppler() {
-    let (_d, s) = simulated(Family::Office, MotionKind::Handheld, 3, 20.0);
-    let doppler = run(&s, &OfflineConfig::default()).unwrap();
-    let times: Vec<f64> = doppler.trajectory.iter().map(|p| p.t).collect();
+    let (_d, s, doppler, times) = walk(Family::Office, MotionKind::Handheld, 3, 20.0);
     let m = motions(&s, &times, 1.0);
     let learned = LearnedConfig::default();
     let imu = with(&s, Estimator::ImuOnly, &[], learned);
@@ -127,9 +139,7 @@ fn right_motions_carry_an_imu_without_radar_and_do_not_hurt_doppler() {
 
 #[test]
 fn reversed_motions_fail_the_online_check_and_stop() {
-    let (_d, s) = simulated(Family::Corridor, MotionKind::Handheld, 5, 20.0);
-    let doppler = run(&s, &OfflineConfig::default()).unwrap();
-    let times: Vec<f64> = doppler.trajectory.iter().map(|p| p.t).collect();
+    let (_d, s, doppler, times) = walk(Family::Corridor, MotionKind::Handheld, 5, 20.0);
     // A network fed the wrong axis convention (a rig mounted backwards): every motion reversed.
     // (Twice the distance passes the check: the deviation grows with the distance, and with
     // Doppler outweighing them such motions cost nothing here.)
@@ -167,9 +177,7 @@ fn reversed_motions_fail_the_online_check_and_stop() {
 fn reversed_motions_fail_the_online_check_with_the_offset_calibration_on_too() {
     // Calibrated, reversed motions on a steady walk read as a steady offset of twice the
     // velocity and agree with the filter once it is taken off; the check judges them before.
-    let (_d, s) = simulated(Family::Corridor, MotionKind::Handheld, 5, 20.0);
-    let doppler = run(&s, &OfflineConfig::default()).unwrap();
-    let times: Vec<f64> = doppler.trajectory.iter().map(|p| p.t).collect();
+    let (_d, s, _, times) = walk(Family::Corridor, MotionKind::Handheld, 5, 20.0);
     let m = motions(&s, &times, -1.0);
     let on = LearnedConfig {
         calibrate_offset: true,
@@ -183,9 +191,7 @@ fn reversed_motions_fail_the_online_check_with_the_offset_calibration_on_too() {
 
 #[test]
 fn at_rest_motions_are_not_applied_and_the_rig_does_not_move() {
-    let (_d, s) = simulated(Family::Office, MotionKind::Static, 21, 12.0);
-    let doppler = run(&s, &OfflineConfig::default()).unwrap();
-    let times: Vec<f64> = doppler.trajectory.iter().map(|p| p.t).collect();
+    let (_d, s, _, times) = walk(Family::Office, MotionKind::Static, 21, 12.0);
     // A network that "walks" at rest (what the simulation-trained one did on a real rig):
     // 5 cm forward per keyframe.
     let m: Vec<RelativeMotion> = times
@@ -226,9 +232,7 @@ fn a_network_that_says_where_it_is_unsure_is_trusted_less_there() {
     // Every other motion 2.5x too long, and the network says so through a large predicted
     // deviation (1 m against 1 cm): weighing its own deviation in, the filter follows the right
     // motions; without it, it averages the wrong ones in.
-    let (_d, s) = simulated(Family::Office, MotionKind::Handheld, 3, 20.0);
-    let doppler = run(&s, &OfflineConfig::default()).unwrap();
-    let times: Vec<f64> = doppler.trajectory.iter().map(|p| p.t).collect();
+    let (_d, s, _, times) = walk(Family::Office, MotionKind::Handheld, 3, 20.0);
     let right = motions(&s, &times, 1.0);
     let mixed: Vec<RelativeMotion> = right
         .iter()
@@ -283,9 +287,7 @@ fn a_steady_offset_of_the_network_is_measured_where_the_radar_sees_the_motion() 
     // A network whose every motion carries the same sideways velocity error (0.4 m/s along the
     // body's x axis): with the offset calibration the filter takes it off, without it the
     // filter is pulled sideways by every measurement.
-    let (_d, s) = simulated(Family::Office, MotionKind::Handheld, 3, 20.0);
-    let doppler = run(&s, &OfflineConfig::default()).unwrap();
-    let times: Vec<f64> = doppler.trajectory.iter().map(|p| p.t).collect();
+    let (_d, s, doppler, times) = walk(Family::Office, MotionKind::Handheld, 3, 20.0);
     let offset = Vector3::new(0.4, 0.0, 0.0);
     let m: Vec<RelativeMotion> = motions(&s, &times, 1.0)
         .into_iter()
