@@ -116,6 +116,10 @@ pub struct ScoreArgs {
     /// (default: the shipped setting, docs/odometry.md; 0: off).
     #[arg(long, value_name = "S")]
     stack_window: Option<f64>,
+    /// Let the radar updates correct the heading and the gyro bias about the vertical (default:
+    /// off, the heading from the gyro; docs/odometry.md "Heading comes from the gyro").
+    #[arg(long)]
+    radar_heading: bool,
 }
 
 /// One column of the table.
@@ -310,6 +314,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
     if let Some(w) = a.persist_window {
         classical.persist.window_s = w.max(0.0);
     }
+    classical.rio.radar_heading |= a.radar_heading;
     // Per runtime column: learned measurements applied, evaluated, NIS sum; sessions handed over.
     let mut learned_use: Vec<(u64, u64, f64, usize)> = vec![(0, 0, 0.0, 0); estimators.len()];
     let mut per: Vec<(String, Vec<SessionScore>)> = estimators
@@ -340,12 +345,13 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         for (k, ((_, est), (_, out))) in estimators.iter_mut().zip(per.iter_mut()).enumerate() {
             let trajectory = match est {
                 Column::Classical(est) => {
-                    let cfg = OfflineConfig {
+                    let mut cfg = OfflineConfig {
                         estimator: *est,
                         stack_window_s: classical.stack_window_s,
                         persist: classical.persist,
                         ..OfflineConfig::default()
                     };
+                    cfg.rio.radar_heading = classical.rio.radar_heading;
                     // What the rig's operator knows and says (`odometry --vehicle`): a car.
                     let cfg = if vehicle { cfg.ground_vehicle() } else { cfg };
                     run_offline(&s, &cfg)?.trajectory
