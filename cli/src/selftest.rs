@@ -8,6 +8,7 @@
 
 use clap::Args;
 use imu_driver::{DataId, DataKind, Message, MtData2Writer, Precision, BID_MASTER};
+use milliego_preprocess::RadarInput;
 use radar_driver::encode::{CompressedRaw, FrameBuilder, QPointRaw, TlvOut};
 use radar_driver::host::PointCloud;
 use radar_driver::tlv::{CompressedUnits, Target};
@@ -289,18 +290,20 @@ fn preprocess_digest() -> Result<Value> {
                     x: 4.0 * a.sin(),
                     y: 1.0 + 6.0 * (a * 0.5).cos().abs(),
                     z: 0.3 * (a * 1.7).sin(),
-                    velocity: -0.5,
+                    velocity: -0.5 + 0.1 * a.cos(),
                 }
             })
             .collect();
-        if let Some(p) = b.push_radar(n, t, &points) {
-            p.iter().for_each(|v| h.f32(*v));
+        if let Some((p, d)) = b.push_radar(n, t, &points) {
+            p.iter().chain(d.iter()).for_each(|v| h.f32(*v));
         }
         while let Some(w) = b.poll() {
             windows += 1;
             w.imu.iter().flatten().for_each(|v| h.f32(*v));
-            w.radar_tensor(&norm, &mut tensor);
-            tensor.iter().for_each(|v| h.f32(*v));
+            for input in [RadarInput::Depth, RadarInput::DepthDoppler] {
+                w.radar_tensor(input, &norm, &mut tensor);
+                tensor.iter().for_each(|v| h.f32(*v));
+            }
         }
     }
     Ok(json!({"digest": h.hex(), "windows": windows}))

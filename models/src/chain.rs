@@ -221,6 +221,8 @@ mod tests {
                     t_cur: cur as f64 * 0.1,
                     prev: pano,
                     cur: pano,
+                    prev_doppler: pano,
+                    cur_doppler: pano,
                     imu: &imu,
                 };
                 match chain.step(model, &w) {

@@ -16,7 +16,7 @@ pub mod chain;
 pub mod offline;
 
 use milliego_preprocess::window::Window;
-use milliego_preprocess::{Config, Norm, IMU_LEN, RADAR_LEN};
+use milliego_preprocess::{Config, Norm, RadarInput, IMU_LEN, RADAR_LEN};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use tract_onnx::prelude::*;
@@ -50,6 +50,10 @@ pub struct ModelMeta {
     pub preprocess: Config,
     /// Normalisation of the radar images.
     pub norm: Norm,
+    /// What the radar input's six channels carry (absent in files made before Doppler input
+    /// existed: the depth copies).
+    #[serde(default)]
+    pub radar_input: RadarInput,
     /// Label conventions, in words.
     #[serde(default)]
     pub label: String,
@@ -371,7 +375,7 @@ impl Model {
         if self.radar_zeroed {
             self.radar.fill(0.0);
         } else {
-            w.radar_tensor(&self.meta.norm, &mut self.radar);
+            w.radar_tensor(self.meta.radar_input, &self.meta.norm, &mut self.radar);
         }
         let radar = self.tensor(&[1, 6, 64, 256], &self.radar[..])?;
         let imu = self.imu_tensor(w.imu)?;

@@ -5,6 +5,7 @@
 
 use milliego_models::{floats, read_meta, Model};
 use milliego_preprocess::panorama::radar_tensor;
+use milliego_preprocess::RadarInput;
 use milliego_preprocess::{IMU_LEN, PANO_LEN, RADAR_LEN};
 use safetensors::SafeTensors;
 use std::path::PathBuf;
@@ -60,8 +61,25 @@ fn preprocessing_expansion_is_bit_exact_with_the_trainer() {
     for k in 0..n {
         let prev: [f32; PANO_LEN] = f32s(&st, &format!("panorama_prev_{k}")).try_into().unwrap();
         let cur: [f32; PANO_LEN] = f32s(&st, &format!("panorama_cur_{k}")).try_into().unwrap();
+        // A Doppler model's bundle carries the Doppler panoramas too (golden.py).
+        let doppler = |name: String| -> [f32; PANO_LEN] {
+            match meta.radar_input {
+                RadarInput::Depth => [0.0; PANO_LEN],
+                RadarInput::DepthDoppler => f32s(&st, &name).try_into().unwrap(),
+            }
+        };
+        let (prev_d, cur_d) = (
+            doppler(format!("doppler_prev_{k}")),
+            doppler(format!("doppler_cur_{k}")),
+        );
         let mut ours = Box::new([0.0f32; RADAR_LEN]);
-        radar_tensor(&prev, &cur, &meta.norm, &mut ours);
+        radar_tensor(
+            meta.radar_input,
+            (&prev, &prev_d),
+            (&cur, &cur_d),
+            &meta.norm,
+            &mut ours,
+        );
         let theirs = f32s(&st, &format!("radar_{k}"));
         let differing = ours
             .iter()
@@ -239,6 +257,8 @@ fn radar_zeroed_feeds_zeros_instead_of_the_images() {
         t_cur: 0.25,
         prev: &prev,
         cur: &cur,
+        prev_doppler: &[0.0; PANO_LEN],
+        cur_doppler: &[0.0; PANO_LEN],
         imu: &imu,
     };
     let mut m = Model::load(&dir.join("model.onnx"), None).unwrap();

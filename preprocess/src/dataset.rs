@@ -79,6 +79,8 @@ pub struct Shard {
     pub session: String,
     /// Overlaid panorama per accepted radar frame, F x 16 x 64.
     pub panorama: Vec<f32>,
+    /// Radial velocity of each overlaid panorama pixel's point \[m/s\], F x 16 x 64.
+    pub doppler: Vec<f32>,
     /// Frame time on the session clock \[s\], F.
     pub frame_time: Vec<f64>,
     /// Ground-truth body pose at each frame, F x 7 (x y z \[m\], qx qy qz qw; NaN where the
@@ -116,7 +118,7 @@ impl Shard {
 /// What [`feed_session`] hands its callback, in time order.
 #[derive(Debug)]
 pub enum Event<'a> {
-    /// A radar frame was accepted: its push sequence number, time \[s\] and overlaid panorama.
+    /// A radar frame was accepted: its push sequence number, time \[s\] and overlaid panoramas.
     Frame {
         /// Push sequence number (index among accepted frames).
         seq: u64,
@@ -124,6 +126,8 @@ pub enum Event<'a> {
         t: f64,
         /// Overlaid panorama.
         panorama: &'a [f32; crate::PANO_LEN],
+        /// Radial velocity of each of its pixels' point \[m/s\].
+        doppler: &'a [f32; crate::PANO_LEN],
     },
     /// A window is ready.
     Window(Window<'a>),
@@ -199,8 +203,13 @@ pub fn feed_session(
             drain(&mut builder, on);
         }
         let f = &frames[i];
-        if let Some(panorama) = builder.push_radar(f.frame_number, t, &f.cloud.points) {
-            on(Event::Frame { seq, t, panorama });
+        if let Some((panorama, doppler)) = builder.push_radar(f.frame_number, t, &f.cloud.points) {
+            on(Event::Frame {
+                seq,
+                t,
+                panorama,
+                doppler,
+            });
             seq += 1;
         }
         drain(&mut builder, on);
@@ -230,8 +239,14 @@ pub fn shard_from_session(session: &Session, pre: &Config) -> Result<Shard, Data
         ..Shard::default()
     };
     let fed = feed_session(session, pre, &mut |ev| match ev {
-        Event::Frame { t, panorama, .. } => {
+        Event::Frame {
+            t,
+            panorama,
+            doppler,
+            ..
+        } => {
             shard.panorama.extend_from_slice(panorama);
+            shard.doppler.extend_from_slice(doppler);
             shard.frame_time.push(t);
             match interpolate(&gt, t, GT_MAX_GAP_S) {
                 Some(p) => {
@@ -292,6 +307,12 @@ pub fn write_shard(path: &Path, s: &Shard) -> Result<(), DatasetError> {
             Dtype::F32,
             vec![f, PANO_H, PANO_W],
             le_bytes(&s.panorama, f32::to_le_bytes),
+        ),
+        (
+            "doppler",
+            Dtype::F32,
+            vec![f, PANO_H, PANO_W],
+            le_bytes(&s.doppler, f32::to_le_bytes),
         ),
         (
             "frame_time",

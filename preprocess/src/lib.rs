@@ -29,8 +29,33 @@ pub const UPSCALE: usize = 4;
 pub const IMG_H: usize = PANO_H * UPSCALE;
 /// Model image width.
 pub const IMG_W: usize = PANO_W * UPSCALE;
-/// Channels of the model's radar input: 3 copies of the previous frame's image, 3 of the current.
+/// Channels of the model's radar input: 3 of the previous frame, 3 of the current ([`RadarInput`]).
 pub const RADAR_CHANNELS: usize = 6;
+/// Radial velocity that maps to 1 in a Doppler image \[m/s\]; faster ones are clamped to +-1.
+pub const DOPPLER_SCALE_MPS: f32 = 5.0;
+
+/// What the six channels of a model's radar input carry (model metadata `radar_input`;
+/// `docs/model.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RadarInput {
+    /// The paper's input: each frame's depth image three times.
+    #[default]
+    Depth,
+    /// Our extension ("milliEgo+D"): each frame's depth image, its Doppler image
+    /// (`clamp(v / DOPPLER_SCALE_MPS, -1, 1)`), its depth image again.
+    DepthDoppler,
+}
+
+impl RadarInput {
+    /// The groups of channels that always carry the same values (what the export folds).
+    pub fn copies(self) -> &'static [&'static [usize]] {
+        match self {
+            RadarInput::Depth => &[&[0, 1, 2], &[3, 4, 5]],
+            RadarInput::DepthDoppler => &[&[0, 2], &[1], &[3, 5], &[4]],
+        }
+    }
+}
 /// Floats in the model's radar input (6 x 64 x 256).
 pub const RADAR_LEN: usize = RADAR_CHANNELS * IMG_H * IMG_W;
 /// IMU samples in a window.

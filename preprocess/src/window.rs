@@ -9,7 +9,7 @@
 
 use crate::imu::{resample, ImuSample, ImuWindowError};
 use crate::panorama::{overlay, project, radar_tensor, ProjectStats};
-use crate::{Config, Norm, SettingError, IMU_LEN, PANO_LEN, RADAR_LEN};
+use crate::{Config, Norm, RadarInput, SettingError, IMU_LEN, PANO_LEN, RADAR_LEN};
 use nalgebra::{UnitQuaternion, Vector3};
 use radar_driver::tlv::Point;
 use std::collections::VecDeque;
@@ -93,7 +93,9 @@ struct Slot {
     frame: u32,
     t: f64,
     single: Box<[f32; PANO_LEN]>,
+    single_doppler: Box<[f32; PANO_LEN]>,
     overlaid: Box<[f32; PANO_LEN]>,
+    overlaid_doppler: Box<[f32; PANO_LEN]>,
     pending: bool,
 }
 
@@ -116,14 +118,24 @@ pub struct Window<'a> {
     pub prev: &'a [f32; PANO_LEN],
     /// Overlaid panorama of the current frame.
     pub cur: &'a [f32; PANO_LEN],
+    /// Radial velocities of the previous frame's overlaid panorama's points \[m/s\].
+    pub prev_doppler: &'a [f32; PANO_LEN],
+    /// Radial velocities of the current frame's overlaid panorama's points \[m/s\].
+    pub cur_doppler: &'a [f32; PANO_LEN],
     /// IMU window (body frame, oldest first).
     pub imu: &'a [[f32; 6]; IMU_LEN],
 }
 
 impl Window<'_> {
-    /// The model's radar input (6 x 64 x 256) with the model's normalisation.
-    pub fn radar_tensor(&self, norm: &Norm, out: &mut [f32; RADAR_LEN]) {
-        radar_tensor(self.prev, self.cur, norm, out);
+    /// The model's radar input (6 x 64 x 256) in the model's layout, with its normalisation.
+    pub fn radar_tensor(&self, input: RadarInput, norm: &Norm, out: &mut [f32; RADAR_LEN]) {
+        radar_tensor(
+            input,
+            (self.prev, self.prev_doppler),
+            (self.cur, self.cur_doppler),
+            norm,
+            out,
+        );
     }
 }
 
@@ -165,7 +177,9 @@ impl WindowBuilder {
                 frame: 0,
                 t: 0.0,
                 single: Box::new([0.0; PANO_LEN]),
+                single_doppler: Box::new([0.0; PANO_LEN]),
                 overlaid: Box::new([0.0; PANO_LEN]),
+                overlaid_doppler: Box::new([0.0; PANO_LEN]),
                 pending: false,
             })
             .collect();
@@ -213,9 +227,14 @@ impl WindowBuilder {
     }
 
     /// Adds a radar frame (points in the radar frame, measurement time on the common clock).
-    /// Returns the overlaid panorama of this frame (what a dataset stores per frame), or None when
-    /// the frame was ignored (its number did not advance; counted).
-    pub fn push_radar(&mut self, frame: u32, t: f64, points: &[Point]) -> Option<&[f32; PANO_LEN]> {
+    /// Returns the overlaid depth and Doppler panoramas of this frame (what a dataset stores per
+    /// frame), or None when the frame was ignored (its number did not advance; counted).
+    pub fn push_radar(
+        &mut self,
+        frame: u32,
+        t: f64,
+        points: &[Point],
+    ) -> Option<(&[f32; PANO_LEN], &[f32; PANO_LEN])> {
         if let Some(last) = self.ring.back() {
             // Frame numbers advance by 1..2^31 (with wrap-around); anything else is a duplicate,
             // an out-of-order frame (time not advancing: ignored) or a sensor restart (time
@@ -243,20 +262,28 @@ impl WindowBuilder {
         slot.t = t;
         slot.pending = true;
         self.next_seq += 1;
-        let stats = project(&self.cfg.pre, points, &mut slot.single);
+        let stats = project(
+            &self.cfg.pre,
+            points,
+            &mut slot.single,
+            &mut slot.single_doppler,
+        );
         self.counters.points.add(stats);
         let overlay_n = self.cfg.pre.overlay;
         overlay(
             self.ring
                 .iter()
                 .filter(|s| frame.wrapping_sub(s.frame) < overlay_n)
-                .map(|s| &*s.single)
-                .chain(core::iter::once(&*slot.single)),
+                .map(|s| (&*s.single, &*s.single_doppler))
+                .chain(core::iter::once((&*slot.single, &*slot.single_doppler))),
             &mut slot.overlaid,
+            &mut slot.overlaid_doppler,
         );
         self.counters.frames += 1;
         self.ring.push_back(slot);
-        self.ring.back().map(|s| &*s.overlaid)
+        self.ring
+            .back()
+            .map(|s| (&*s.overlaid, &*s.overlaid_doppler))
     }
 
     fn retire(&mut self, s: Slot) {
@@ -335,6 +362,8 @@ impl WindowBuilder {
             t_cur: c.t,
             prev: &p.overlaid,
             cur: &c.overlaid,
+            prev_doppler: &p.overlaid_doppler,
+            cur_doppler: &c.overlaid_doppler,
             imu: &self.imu_row,
         })
     }
@@ -448,19 +477,26 @@ mod tests {
     #[test]
     fn overlay_uses_the_last_three_frames_by_number() {
         let mut b = WindowBuilder::new(BuilderConfig::default()).unwrap();
-        let pts = |r: f32| [point(0.0, r)];
-        b.push_radar(1, 0.05, &pts(10.0));
-        b.push_radar(2, 0.10, &pts(4.0));
-        let p = *b.push_radar(3, 0.15, &pts(8.0)).unwrap();
-        // All three are on boresight: the nearest (4 m) wins.
-        assert!((p[8 * 64 + 32] - 0.8).abs() < 1e-6);
-        let p = *b.push_radar(4, 0.20, &pts(8.0)).unwrap();
-        assert!((p[8 * 64 + 32] - 0.8).abs() < 1e-6);
-        let p = *b.push_radar(5, 0.25, &pts(8.0)).unwrap();
-        assert!(
-            (p[8 * 64 + 32] - 0.6).abs() < 1e-6,
-            "frame 2 has left the overlay"
-        );
+        // Each point's Doppler tells its frame apart.
+        let pts = |r: f32, v: f32| {
+            [Point {
+                velocity: v,
+                ..point(0.0, r)
+            }]
+        };
+        let px = 8 * 64 + 32;
+        b.push_radar(1, 0.05, &pts(10.0, -1.0));
+        b.push_radar(2, 0.10, &pts(4.0, -2.0));
+        let (p, d) = b.push_radar(3, 0.15, &pts(8.0, -3.0)).unwrap();
+        // All three are on boresight: the nearest (4 m) wins, with its Doppler.
+        assert!((p[px] - 0.8).abs() < 1e-6);
+        assert_eq!(d[px], -2.0);
+        let (p, d) = b.push_radar(4, 0.20, &pts(8.0, -4.0)).unwrap();
+        assert!((p[px] - 0.8).abs() < 1e-6);
+        assert_eq!(d[px], -2.0);
+        let (p, d) = b.push_radar(5, 0.25, &pts(8.0, -5.0)).unwrap();
+        assert!((p[px] - 0.6).abs() < 1e-6, "frame 2 has left the overlay");
+        assert_eq!(d[px], -3.0, "of equal depths, the earliest frame's Doppler");
     }
 
     #[test]

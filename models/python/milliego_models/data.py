@@ -14,6 +14,8 @@ import torch
 
 FORMAT = "milliego-dataset"
 UPSCALE = 4
+# Radial velocity that maps to 1 in a Doppler image [m/s] (Rust: `milliego_preprocess::DOPPLER_SCALE_MPS`).
+DOPPLER_SCALE_MPS = np.float32(5.0)
 
 
 def normalise(img: np.ndarray, norm: dict) -> np.ndarray:
@@ -35,10 +37,21 @@ def expand_panorama(pano: np.ndarray, norm: dict) -> np.ndarray:
     return normalise(img, norm)
 
 
-def stack_pair(img_prev: np.ndarray, img_cur: np.ndarray) -> np.ndarray:
-    """Two normalised images [..., 64, 256] -> radar input [..., 6, 64, 256]: prev x3 then cur x3."""
-    return np.concatenate([np.repeat(img_prev[..., None, :, :], 3, -3),
-                           np.repeat(img_cur[..., None, :, :], 3, -3)], axis=-3)
+def expand_doppler(doppler: np.ndarray) -> np.ndarray:
+    """Doppler panorama [..., 16, 64] (m/s) -> Doppler image [..., 64, 256]: x4 nearest, then
+    `clip(v / DOPPLER_SCALE_MPS, -1, 1)` in f32 (the Rust `panorama::expand_doppler`, bit for bit)."""
+    d = np.clip(np.asarray(doppler, dtype=np.float32) / DOPPLER_SCALE_MPS, np.float32(-1), np.float32(1))
+    return np.repeat(np.repeat(d, UPSCALE, axis=-2), UPSCALE, axis=-1).astype(np.float32)
+
+
+def stack_pair(img_prev: np.ndarray, img_cur: np.ndarray, dop_prev: np.ndarray | None = None,
+               dop_cur: np.ndarray | None = None) -> np.ndarray:
+    """Two normalised images [..., 64, 256] -> radar input [..., 6, 64, 256]: prev x3 then cur x3
+    (`radar_input` "depth"); with Doppler images, each frame's depth, Doppler, depth ("depth_doppler")."""
+    if dop_prev is None:
+        return np.concatenate([np.repeat(img_prev[..., None, :, :], 3, -3),
+                               np.repeat(img_cur[..., None, :, :], 3, -3)], axis=-3)
+    return np.stack([img_prev, dop_prev, img_prev, img_cur, dop_cur, img_cur], axis=-3)
 
 
 @dataclass
@@ -51,6 +64,7 @@ class Session:
     pair: np.ndarray
     imu: np.ndarray
     label: np.ndarray
+    doppler: np.ndarray | None = None  # [F,16,64] m/s, datasets that carry it
 
 
 @dataclass
@@ -60,7 +74,9 @@ class WindowData:
     norm: dict
     preprocess: dict
     kind: str = "panorama"
+    radar_input: str = "depth"
     frames: np.ndarray = field(init=False)
+    doppler: np.ndarray | None = field(init=False)
     pair: np.ndarray = field(init=False)  # global frame indices
     imu: np.ndarray = field(init=False)
     label: np.ndarray = field(init=False)
@@ -71,6 +87,8 @@ class WindowData:
     def __post_init__(self):
         offsets = np.cumsum([0] + [len(s.frames) for s in self.sessions])
         self.frames = np.concatenate([s.frames for s in self.sessions]).astype(np.float32)
+        self.doppler = (np.concatenate([s.doppler for s in self.sessions]).astype(np.float32)
+                        if all(s.doppler is not None for s in self.sessions) else None)
         self.gt_pose = np.concatenate([s.gt_pose for s in self.sessions]).astype(np.float64)
         self.pair = np.concatenate([s.pair.astype(np.int64) + o for s, o in zip(self.sessions, offsets)])
         self.imu = np.concatenate([s.imu for s in self.sessions]).astype(np.float32)
@@ -89,7 +107,15 @@ class WindowData:
     def radar(self, idx) -> np.ndarray:
         """Model radar input [B,6,64,256] for window ids `idx`."""
         p = self.pair[np.asarray(idx)]
-        return stack_pair(self.images(p[..., 0]), self.images(p[..., 1]))
+        if self.radar_input == "depth":
+            return stack_pair(self.images(p[..., 0]), self.images(p[..., 1]))
+        if self.radar_input != "depth_doppler":
+            raise ValueError(f"radar input {self.radar_input!r}: 'depth' or 'depth_doppler'")
+        if self.doppler is None:
+            raise ValueError("radar input 'depth_doppler' needs a dataset with a 'doppler' tensor in every "
+                             "shard (built by `milliego dataset build` since Doppler input exists)")
+        return stack_pair(self.images(p[..., 0]), self.images(p[..., 1]),
+                          expand_doppler(self.doppler[p[..., 0]]), expand_doppler(self.doppler[p[..., 1]]))
 
     def batch(self, idx) -> dict[str, torch.Tensor]:
         idx = np.asarray(idx, dtype=np.int64)
@@ -105,9 +131,10 @@ class WindowData:
             if keep <= 0:
                 break
             n = min(keep, len(s.pair))
-            out.append(Session(s.name, s.frames, s.frame_time, s.gt_pose, s.pair[:n], s.imu[:n], s.label[:n]))
+            out.append(Session(s.name, s.frames, s.frame_time, s.gt_pose, s.pair[:n], s.imu[:n], s.label[:n],
+                               s.doppler))
             keep -= n
-        return WindowData(out, self.norm, self.preprocess, self.kind)
+        return WindowData(out, self.norm, self.preprocess, self.kind, self.radar_input)
 
 
 def build_chains(pair: np.ndarray, session_of: np.ndarray) -> list[np.ndarray]:
@@ -142,7 +169,7 @@ def load_dataset(path: str | Path, max_windows: int | None = None) -> WindowData
         if len(pair) and np.any(pair[:, 1] - pair[:, 0] != gap):
             raise ValueError(f"{shard['file']}: window with cur - prev != gap {gap}")
         sessions.append(Session(shard.get("session", shard["file"]), t["panorama"], t["frame_time"],
-                                t["gt_pose"], pair, t["imu"], t["label"]))
+                                t["gt_pose"], pair, t["imu"], t["label"], t.get("doppler")))
     return WindowData(sessions, manifest["norm"], manifest["preprocess"]).truncated(max_windows)
 
 

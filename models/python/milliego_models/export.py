@@ -26,33 +26,36 @@ import onnx
 import torch
 
 from .geometry import LABEL_CONVENTION
-from .model import IMU_SHAPE, RADAR_COPIES, RADAR_SHAPE, Exported, MilliEgo, count_params
+from .model import IMU_SHAPE, RADAR_INPUTS, RADAR_SHAPE, Exported, MilliEgo, count_params
 from .onnx_utils import (fold_constants, fold_copied_inputs, fold_pads_into_convs, get_metadata, op_problems,
                          ort_session, set_metadata)
 
 OPSET = 17
 
 
-def copied_radar(images: torch.Tensor) -> torch.Tensor:
-    """[B, len(RADAR_COPIES), 64, 256] -> radar input [B, 6, 64, 256], image k in every channel of group k."""
+def copied_radar(images: torch.Tensor, radar_input: str = "depth") -> torch.Tensor:
+    """[B, groups, 64, 256] -> radar input [B, 6, 64, 256], image k in every channel of group k
+    (`model.RADAR_INPUTS[radar_input]`)."""
     out = images.new_empty(images.shape[0], RADAR_SHAPE[0], *images.shape[2:])
-    for k, grp in enumerate(RADAR_COPIES):
+    for k, grp in enumerate(RADAR_INPUTS[radar_input]):
         out[:, list(grp)] = images[:, k:k + 1]
     return out
 
 
-def example_inputs(net: MilliEgo, seed: int = 0, hidden: int | None = None):
-    """Seeded inputs as the runtime feeds them (copied radar channels, see model.RADAR_COPIES)."""
+def example_inputs(net: MilliEgo | None, seed: int = 0, hidden: int | None = None, radar_input: str | None = None):
+    """Seeded inputs as the runtime feeds them (copied radar channels, see model.RADAR_INPUTS)."""
     g = torch.Generator().manual_seed(seed)
-    images = torch.rand(1, len(RADAR_COPIES), *RADAR_SHAPE[1:], generator=g) - 0.1
-    return (copied_radar(images), torch.randn(1, *IMU_SHAPE, generator=g),
+    radar_input = radar_input or (net.radar_input if net is not None else "depth")
+    groups = RADAR_INPUTS[radar_input]
+    images = torch.rand(1, len(groups), *RADAR_SHAPE[1:], generator=g) - 0.1
+    return (copied_radar(images, radar_input), torch.randn(1, *IMU_SHAPE, generator=g),
             torch.randn(1, 4, net.hidden if hidden is None else hidden, generator=g) * 0.5)
 
 
 def clean_graph(model: onnx.ModelProto, meta: dict) -> onnx.ModelProto:
     """The graph passes after the exporter; checks the op set and stores `meta` (plus what was folded)."""
     model = fold_pads_into_convs(fold_constants(model))
-    folded = fold_copied_inputs(model, "radar", RADAR_COPIES)
+    folded = fold_copied_inputs(model, "radar", RADAR_INPUTS[meta.get("radar_input", "depth")])
     model = onnx.shape_inference.infer_shapes(model, strict_mode=True)
     bad = op_problems(model)
     if bad:
@@ -68,7 +71,8 @@ def make_metadata(net: MilliEgo, stateful: bool, preprocess: dict | None, norm: 
             "preprocess": preprocess, "norm": norm, "label": LABEL_CONVENTION,
             "state": "state[:,0..4] = h1, c1, h2, c2 of the 2 fusion LSTM layers; zeros at a chain start"
                      + ("" if stateful else "; stateless model: feed zeros every call"),
-            "trained": bool(trained), "precision": precision, "params": count_params(net)}
+            "trained": bool(trained), "precision": precision, "params": count_params(net),
+            "radar_input": net.radar_input}
     if val_ate_m is not None:
         meta["val_ate_m"] = float(val_ate_m)
     if net.uncertainty:
@@ -112,7 +116,8 @@ def reexport(src: str, out: str) -> float:
     a, b = ort_session(src), ort_session(out)
     diff = 0.0
     for seed in range(4):
-        radar, imu, state = (t.numpy() for t in example_inputs(None, seed, hidden=meta["hidden"]))
+        radar, imu, state = (t.numpy() for t in example_inputs(None, seed, hidden=meta["hidden"],
+                                                               radar_input=meta.get("radar_input", "depth")))
         feed = {"radar": radar, "imu": imu, "state": state}
         diff = max(diff, max(float(np.abs(x - y).max()) for x, y in zip(a.run(None, feed), b.run(None, feed))))
     return diff
@@ -120,7 +125,7 @@ def reexport(src: str, out: str) -> float:
 
 def load_checkpoint(path: str) -> tuple[MilliEgo, dict]:
     ck = torch.load(path, map_location="cpu", weights_only=False)
-    net = MilliEgo(ck["config"], ck.get("uncertainty", False))
+    net = MilliEgo(ck["config"], ck.get("uncertainty", False), ck.get("radar_input", "depth"))
     net.load_state_dict(ck["model"])
     return net.eval(), ck
 

@@ -45,6 +45,9 @@ def golden(fp32: str, int8: str, data, windows: int, chain: int | None = None) -
         p = data.pair[w]
         out |= {f"panorama_prev_{k}": data.frames[p[0]][None].astype(np.float32),
                 f"panorama_cur_{k}": data.frames[p[1]][None].astype(np.float32)}
+        if data.radar_input == "depth_doppler":
+            out |= {f"doppler_prev_{k}": data.doppler[p[0]][None].astype(np.float32),
+                    f"doppler_cur_{k}": data.doppler[p[1]][None].astype(np.float32)}
         out |= {f"radar_{k}": feed["radar"], f"imu_{k}": feed["imu"], f"state_{k}": feed["state"],
                 f"pose_fp32_{k}": pose, f"state_out_fp32_{k}": state_out,
                 f"pose_int8_{k}": pose8, f"state_out_int8_{k}": state_out8}
@@ -67,6 +70,7 @@ def main(argv=None) -> int:
     data = load_any(a.data)
     # Images through the model's own normalisation (what the runtime uses), not this dataset's.
     data.norm = get_metadata(onnx.load(a.fp32))["norm"] or data.norm
+    data.radar_input = get_metadata(onnx.load(a.fp32)).get("radar_input", "depth")
     t = golden(a.fp32, a.int8, data, a.windows, a.chain)
     meta = get_metadata(onnx.load(a.fp32))
     save_file(t, a.out, metadata={"milliego": json.dumps(meta, sort_keys=True), "windows": str(a.windows),

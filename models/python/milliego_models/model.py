@@ -5,7 +5,9 @@ I/O contract (one radar-frame pair per call, batch B):
     forward(radar [B,6,64,256] f32, imu [B,20,6] f32, state [B,4,H] f32)
         -> (pose [B,6] f32, state_out [B,4,H] f32)
 
-- radar: `[expand(pano[prev])]*3 + [expand(pano[cur])]*3` on channels, normalised (see `data.expand_panorama`).
+- radar: `[expand(pano[prev])]*3 + [expand(pano[cur])]*3` on channels, normalised (see `data.expand_panorama`);
+  with `radar_input="depth_doppler"` the middle channel of each frame is its Doppler image instead
+  (`RADAR_INPUTS`, `data.stack_pair`).
 - imu: accelerometer xyz [m/s^2] then gyro xyz [rad/s], body frame, oldest first, raw units.
 - state: h1, c1, h2, c2 of the two fusion-LSTM layers (H = fusion hidden size). Stateless use feeds zeros.
 - pose: tx, ty, tz [m], roll, pitch, yaw [deg] of the body at `cur` in the body frame at `prev`,
@@ -34,6 +36,10 @@ RADAR_SHAPE = (6, 64, 256)
 # image 3 times, then the current one's 3 times, the authors' way of feeding FlowNet's 6 channels).
 # The export folds each group into one channel of the first convolution (`onnx_utils.fold_copied_inputs`).
 RADAR_COPIES = ((0, 1, 2), (3, 4, 5))
+# What the six channels carry (model metadata `radar_input`) -> the groups of channels that always hold
+# the same image. "depth": the paper's input above. "depth_doppler" (our extension, "milliEgo+D"): per
+# frame its depth image, its Doppler image (`data.expand_doppler`), its depth image again.
+RADAR_INPUTS = {"depth": RADAR_COPIES, "depth_doppler": ((0, 2), (1,), (3, 5), (4,))}
 IMU_SHAPE = (20, 6)
 # (kernel, stride) of the nine FlowNetS-like convolutions.
 CONV_GEOMETRY = ((7, 2), (5, 2), (5, 2), (3, 1), (3, 2), (3, 1), (3, 2), (3, 1), (3, 2))
@@ -121,10 +127,13 @@ LOG_VAR_RANGE = (-16.0, 8.0)
 
 
 class MilliEgo(nn.Module):
-    def __init__(self, config: Config | str = "paper", uncertainty: bool = False):
+    def __init__(self, config: Config | str = "paper", uncertainty: bool = False, radar_input: str = "depth"):
         super().__init__()
         cfg = CONFIGS[config] if isinstance(config, str) else config
+        if radar_input not in RADAR_INPUTS:
+            raise ValueError(f"radar input {radar_input!r}: one of {sorted(RADAR_INPUTS)}")
         self.config = cfg
+        self.radar_input = radar_input
         self.uncertainty = bool(uncertainty)
         convs, pads = [], []
         c_in, (h, w) = RADAR_SHAPE[0], RADAR_SHAPE[1:]

@@ -285,6 +285,7 @@ def main(argv=None) -> int:
     data = load_any(a.data)
     if meta.get("norm"):
         data.norm = meta["norm"]  # calibrate on what the runtime will feed: the model's normalisation
+    data.radar_input = meta.get("radar_input", "depth")
     feeds = calibration_feeds(a.model, data, a.calib_windows, meta["stateful"], meta["hidden"])
     diff = quantize_model(a.model, a.out, feeds, a.per_channel, a.ops,
                           min_matmul_weights=a.min_matmul_weights)

@@ -52,19 +52,28 @@ class Trajectory:
         return np.concatenate([f, w], 1)
 
 
-def render_panoramas(points, pos, rot, pre=PREPROCESS) -> np.ndarray:
-    """Per-frame single panoramas [F,16,64], values 1 - r/max_range (0 = no return)."""
+def render_panoramas(points, pos, rot, pre=PREPROCESS, vel=None):
+    """Per-frame single panoramas [F,16,64], values 1 - r/max_range (0 = no return). With the sensor's
+    world velocity `vel` [F,3], also each bin's radial velocity (the nearest point's; negative
+    approaching): returns (panoramas, Doppler panoramas)."""
     out = np.zeros((len(pos), pre["pano_h"], pre["pano_w"]), np.float32)
+    dop = np.zeros_like(out)
     for f in range(len(pos)):
         body = (points - pos[f]) @ rot[f]
         r = np.linalg.norm(body, axis=1)
+        if vel is not None:
+            vr = -(body / np.maximum(r, 1e-9)[:, None]) @ (rot[f].T @ vel[f])
         az = np.degrees(np.arctan2(body[:, 1], body[:, 0]))
         el = np.degrees(np.arctan2(body[:, 2], np.hypot(body[:, 0], body[:, 1])))
         ok = (np.abs(az) < pre["az_half_deg"]) & (np.abs(el) < pre["el_half_deg"]) & (r < pre["max_range_m"])
         col = np.clip(((pre["az_half_deg"] - az[ok]) / pre["deg_per_px"]).astype(int), 0, pre["pano_w"] - 1)
         row = np.clip(((pre["el_half_deg"] - el[ok]) / pre["deg_per_px"]).astype(int), 0, pre["pano_h"] - 1)
-        np.maximum.at(out[f], (row, col), (1 - r[ok] / pre["max_range_m"]).astype(np.float32))
-    return out
+        val = (1 - r[ok] / pre["max_range_m"]).astype(np.float32)
+        np.maximum.at(out[f], (row, col), val)
+        if vel is not None:
+            order = np.argsort(val, kind="stable")  # the nearest point of a bin is written last
+            dop[f][row[order], col[order]] = vr[ok][order]
+    return out if vel is None else (out, dop)
 
 
 def synthetic_session(frames: int, seed: int, rate_hz: float = 10.0, points: int = 600, pre=PREPROCESS) -> dict:
@@ -73,10 +82,13 @@ def synthetic_session(frames: int, seed: int, rate_hz: float = 10.0, points: int
     t = np.arange(frames) / rate_hz + 1.0
     pos, rot = traj.pos(t), traj.rot(t)
     cloud = np.concatenate([rng.uniform(-12, 12, (points, 2)), rng.uniform(-2, 2.5, (points, 1))], 1)
-    single = render_panoramas(cloud, pos, rot, pre)
-    pano = single.copy()
+    vel = (traj.pos(t + 1e-3) - traj.pos(t - 1e-3)) / 2e-3
+    single, single_dop = render_panoramas(cloud, pos, rot, pre, vel)
+    pano, dop = single.copy(), single_dop.copy()
     for k in range(1, pre["overlay"]):
-        pano[k:] = np.maximum(pano[k:], single[:-k])
+        older = single[:-k] > pano[k:]  # the nearest return of the overlaid frames and its Doppler
+        pano[k:] = np.where(older, single[:-k], pano[k:])
+        dop[k:] = np.where(older, single_dop[:-k], dop[k:])
     gt = np.concatenate([pos, np.stack([rot_to_quat(r) for r in rot])], 1)
     gap, n_imu = pre["gap"], pre["imu_len"]
     cur = np.arange(gap, frames)
@@ -85,7 +97,7 @@ def synthetic_session(frames: int, seed: int, rate_hz: float = 10.0, points: int
     imu = traj.imu(tk.reshape(-1)).reshape(len(pair), n_imu, 6)
     imu += rng.normal(0, [0.05, 0.05, 0.05, 0.005, 0.005, 0.005], imu.shape)
     label = np.stack([relative_label(gt[a], gt[b]) for a, b in pair])
-    return {"panorama": pano.astype(np.float32), "frame_time": t.astype(np.float64), "gt_pose": gt,
+    return {"panorama": pano.astype(np.float32), "doppler": dop.astype(np.float32), "frame_time": t.astype(np.float64), "gt_pose": gt,
             "pair": pair, "imu": imu.astype(np.float32), "label": label.astype(np.float32)}
 
 

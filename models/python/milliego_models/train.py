@@ -43,7 +43,7 @@ from torch.utils.data import DataLoader, DistributedSampler
 
 from .data import ChainSampler, WindowData, WindowIndex, load_any
 from .geometry import aligned_errors, compose, pose_to_matrix
-from .model import CONFIGS, MilliEgo, Unrolled, count_params
+from .model import CONFIGS, RADAR_INPUTS, MilliEgo, Unrolled, count_params
 
 
 def parse_args(argv=None):
@@ -72,6 +72,9 @@ def parse_args(argv=None):
                    help="add the uncertainty head (predicted log-variance per pose component, Gaussian NLL)")
     p.add_argument("--init-onnx", default=None,
                    help="initialise from an exported fp32 model (its weights and image normalisation)")
+    p.add_argument("--radar-input", default="depth", choices=sorted(RADAR_INPUTS),
+                   help="what the radar input's channels carry: depth (the paper's copies) or depth_doppler "
+                        "(milliEgo+D: each frame's Doppler image in its middle channel; needs a dataset with Doppler)")
     p.add_argument("--train-only", default="all", choices=["all", "std"],
                    help="std: train only the uncertainty head (needs --uncertainty; the rest frozen)")
     a = p.parse_args(argv)
@@ -143,7 +146,6 @@ def load_onnx_weights(net: MilliEgo, path: str) -> dict:
     import onnx
     from onnx import numpy_helper
 
-    from .model import RADAR_COPIES
     from .onnx_utils import get_metadata
     model = onnx.load(path)
     meta = get_metadata(model)
@@ -151,6 +153,9 @@ def load_onnx_weights(net: MilliEgo, path: str) -> dict:
         raise ValueError(f"{path}: precision {meta.get('precision')}; initialise from the fp32 file")
     if meta["config"] != net.config.name:
         raise ValueError(f"{path}: config {meta['config']!r}, training {net.config.name!r}")
+    src_input = meta.get("radar_input", "depth")
+    if src_input != net.radar_input and src_input != "depth":
+        raise ValueError(f"{path}: radar input {src_input!r}, training {net.radar_input!r}")
     inits = {i.name.removeprefix("net."): numpy_helper.to_array(i) for i in model.graph.initializer}
     state = net.state_dict()
     missing = []
@@ -162,9 +167,12 @@ def load_onnx_weights(net: MilliEgo, path: str) -> dict:
         w = inits[name]
         if tuple(w.shape) != tuple(value.shape) and name == "convs.0.weight" and meta.get("radar_copies_folded"):
             # Each group's weight on its first channel, zeros on the copies: on copied inputs the same
-            # function, and folding it again at export gives back the same floats (w + 0 + 0 = w).
-            spread = np.zeros((w.shape[0], sum(len(g) for g in RADAR_COPIES)) + w.shape[2:], w.dtype)
-            for k, g in enumerate(RADAR_COPIES):
+            # function, and folding it again at export gives back the same floats (w + 0 + 0 = w). A depth
+            # file's first channels (0 and 3) are depth in either layout, so a depth_doppler network
+            # starts as the depth file's function, with zero weight on its Doppler channels.
+            groups = RADAR_INPUTS[src_input]
+            spread = np.zeros((w.shape[0], sum(len(g) for g in groups)) + w.shape[2:], w.dtype)
+            for k, g in enumerate(groups):
                 spread[:, g[0]] = w[:, k]
             w = spread
         if tuple(w.shape) != tuple(value.shape):
@@ -281,13 +289,14 @@ def main(argv=None) -> int:
     val = load_any(args.val, args.max_val_windows)
     # The model sees every image through the TRAINING set's normalisation (it ships with the model).
     val.norm = train.norm
+    train.radar_input = val.radar_input = args.radar_input
     stateful = args.mode == "stateful"
     gamma = auto_gamma(train.label) if args.gamma == "auto" else float(args.gamma)
     log(f"train {len(train)} windows ({len(train.chains)} chains), val {len(val)} windows, "
         f"world {world}, device {device}, gamma {gamma:.4g}")
 
     seed_all(args.seed)
-    net = MilliEgo(args.config, args.uncertainty).to(device)
+    net = MilliEgo(args.config, args.uncertainty, args.radar_input).to(device)
     if args.init_onnx:
         init_meta = load_onnx_weights(net, args.init_onnx)
         if init_meta.get("norm"):
@@ -379,7 +388,7 @@ def main(argv=None) -> int:
             ck = {"model": net.state_dict(), "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
                   "epoch": epoch + 1, "best": best, "bad_epochs": bad, "gamma": gamma, "rng": [rng_states()],
                   "config": args.config, "stateful": stateful, "hidden": net.hidden, "args": vars(args),
-                  "uncertainty": net.uncertainty,
+                  "uncertainty": net.uncertainty, "radar_input": net.radar_input,
                   "preprocess": train.preprocess, "norm": train.norm, "val_ate_m": m["val_ate_rmse_m"],
                   "params": count_params(net)}
             save(out / "last.pt", ck)

@@ -2,7 +2,9 @@ import json
 
 import numpy as np
 
-from milliego_models.data import ChainSampler, expand_panorama, load_dataset
+import pytest
+
+from milliego_models.data import ChainSampler, expand_doppler, expand_panorama, load_dataset
 from milliego_models.geometry import compose, euler_to_rot, pose_to_matrix, rot_to_euler
 from milliego_models.h5 import load_h5
 from milliego_models.synthetic import write_authors_h5
@@ -18,6 +20,36 @@ def test_expand_panorama_blocks_and_norm():
         block = img[4 * r:4 * r + 4, 4 * c:4 * c + 4]
         np.testing.assert_array_equal(block, np.float32(pano[r, c] / 2.0 - 0.1))
     assert expand_panorama(np.stack([pano, pano]), norm).shape == (2, 64, 256)
+
+
+def test_expand_doppler_blocks_scale_and_clamp():
+    dop = np.zeros((16, 64), np.float32)
+    dop[0, 0], dop[5, 17], dop[15, 63], dop[3, 3] = -2.5, 1.0, 7.0, -30.0
+    img = expand_doppler(dop)
+    assert img.shape == (64, 256) and img.dtype == np.float32
+    for (r, c), want in [((0, 0), -0.5), ((5, 17), 0.2), ((15, 63), 1.0), ((3, 3), -1.0), ((1, 1), 0.0)]:
+        np.testing.assert_array_equal(img[4 * r:4 * r + 4, 4 * c:4 * c + 4], np.float32(want))
+
+
+def test_doppler_input_puts_each_frames_doppler_between_its_depth_copies(datasets):
+    d = load_dataset(datasets[0])
+    assert d.doppler is not None and d.doppler.shape == d.frames.shape
+    # Approaching points (ahead of a sensor moving forward) have negative radial velocity somewhere.
+    assert (d.doppler < 0).any() and (d.doppler > 0).any()
+    depth = d.radar([4, 9])
+    d.radar_input = "depth_doppler"
+    both = d.radar([4, 9])
+    assert both.shape == depth.shape == (2, 6, 64, 256)
+    for ch in (0, 2, 3, 5):  # depth where the paper's input has it
+        np.testing.assert_array_equal(both[:, ch], depth[:, ch])
+    p = d.pair[[4, 9]]
+    np.testing.assert_array_equal(both[:, 1], expand_doppler(d.doppler[p[:, 0]]))
+    np.testing.assert_array_equal(both[:, 4], expand_doppler(d.doppler[p[:, 1]]))
+    assert not np.array_equal(both[:, 1], depth[:, 1])
+    # A dataset without Doppler says so rather than feeding zeros.
+    d.doppler = None
+    with pytest.raises(ValueError, match="doppler"):
+        d.radar([0])
 
 
 def test_euler_roundtrip():

@@ -207,3 +207,60 @@ def test_fixtures_write_a_loadable_uncertainty_model(tmp_path):
     np.testing.assert_array_equal(pose, t["pose"])
     np.testing.assert_array_equal(std, t["pose_std"])
     assert np.all(std > 0) and np.ptp(std) > 0
+
+
+def test_a_doppler_network_starts_as_the_depth_file_and_exports_with_its_layout(stateful_run, datasets, tmp_path):
+    """--init-onnx of a depth file into a depth_doppler network: the same function whatever the Doppler
+    channels hold (their weights start at zero); its export folds the depth copies only, says
+    `radar_input`, and matches PyTorch on real Doppler windows; golden bundles carry the Doppler panoramas."""
+    from milliego_models.model import MilliEgo
+    from milliego_models.train import load_onnx_weights
+    depth = tmp_path / "depth.onnx"
+    run("milliego_models.export", "--checkpoint", stateful_run / "best.pt", "--out", depth)
+    net = MilliEgo("tiny", radar_input="depth_doppler")
+    load_onnx_weights(net, str(depth))
+    net.eval()
+    d = load_dataset(datasets[1])
+    state = example_inputs(net)[2]
+    plain = ort_session(str(depth)).run(None, {"radar": d.radar([3]), "imu": d.imu[[3]], "state": state.numpy()})
+    d.radar_input = "depth_doppler"
+    radar = d.radar([3])
+    assert np.abs(radar[:, 1]).max() > 0.01  # the window has Doppler to ignore
+    with torch.no_grad():
+        pose, state_out = net(torch.from_numpy(radar), torch.from_numpy(d.imu[[3]]), state)
+    np.testing.assert_allclose(pose.numpy(), plain[0], atol=1e-5, rtol=0)
+    np.testing.assert_allclose(state_out.numpy(), plain[1], atol=1e-5, rtol=0)
+
+    # Give the Doppler channels weight, then export: 4 folded channels, metadata, ORT == PyTorch.
+    with torch.no_grad():
+        net.convs[0].weight[:, [1, 4]] = torch.randn_like(net.convs[0].weight[:, [1, 4]])
+    meta = make_metadata(net, True, get_metadata(onnx.load(depth))["preprocess"], d.norm, trained=True)
+    from milliego_models.export import export_model
+    plusd = tmp_path / "plusd.onnx"
+    export_model(net, str(plusd), meta)
+    model = onnx.load(plusd)
+    assert get_metadata(model)["radar_input"] == "depth_doppler"
+    conv0 = next(n for n in model.graph.node if n.name == "/convs.0/Conv")
+    w0 = next(i for i in model.graph.initializer if i.name == conv0.input[1])
+    assert list(w0.dims[:2]) == [net.convs[0].out_channels, 4]
+    got = ort_session(str(plusd)).run(None, {"radar": radar, "imu": d.imu[[3]], "state": state.numpy()})
+    with torch.no_grad():
+        pose, _ = net(torch.from_numpy(radar), torch.from_numpy(d.imu[[3]]), state)
+    np.testing.assert_allclose(got[0], pose.numpy(), atol=1e-4, rtol=0)
+    assert np.abs(got[0] - plain[0]).max() > 1e-4, "the Doppler channels now count"
+    # A depth_doppler file cannot initialise a depth network (its Doppler weights would be lost).
+    try:
+        load_onnx_weights(MilliEgo("tiny"), str(plusd))
+        raise AssertionError("a depth network took a depth_doppler file's weights")
+    except ValueError as e:
+        assert "radar input" in str(e)
+
+    int8, gold = tmp_path / "plusd8.onnx", tmp_path / "golden.safetensors"
+    run("milliego_models.quantize", "--model", plusd, "--data", datasets[0], "--out", int8, "--calib-windows", "16")
+    assert get_metadata(onnx.load(int8))["radar_input"] == "depth_doppler"
+    run("milliego_models.golden", "--fp32", plusd, "--int8", int8, "--data", datasets[1], "--out", gold,
+        "--windows", "2")
+    from safetensors import safe_open
+    with safe_open(str(gold), "numpy") as f:
+        assert {"doppler_prev_0", "doppler_cur_1"} <= set(f.keys())
+        assert np.abs(f.get_tensor("radar_0")[:, 1]).max() > 0
