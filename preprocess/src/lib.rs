@@ -47,15 +47,6 @@ pub enum RadarInput {
     DepthDoppler,
 }
 
-impl RadarInput {
-    /// The groups of channels that always carry the same values (what the export folds).
-    pub fn copies(self) -> &'static [&'static [usize]] {
-        match self {
-            RadarInput::Depth => &[&[0, 1, 2], &[3, 4, 5]],
-            RadarInput::DepthDoppler => &[&[0, 2], &[1], &[3, 5], &[4]],
-        }
-    }
-}
 /// Floats in the model's radar input (6 x 64 x 256).
 pub const RADAR_LEN: usize = RADAR_CHANNELS * IMG_H * IMG_W;
 /// IMU samples in a window.

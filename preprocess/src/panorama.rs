@@ -130,30 +130,26 @@ pub fn overlay<'a>(
 /// block), then `(x - min) / (max - min) - mean`, in f32 in that order (the Python trainer's
 /// `expand_panorama` does the same arithmetic; a test checks them against each other).
 pub fn expand(pano: &[f32; PANO_LEN], norm: &Norm, out: &mut [f32]) {
-    debug_assert_eq!(out.len(), IMG_H * IMG_W);
     let (min, span, mean) = (
         norm.min as f32,
         (norm.max - norm.min) as f32,
         norm.mean as f32,
     );
-    for r in 0..PANO_H {
-        for c in 0..PANO_W {
-            let v = (pano[r * PANO_W + c] - min) / span - mean;
-            for i in 0..UPSCALE {
-                let row = (r * UPSCALE + i) * IMG_W + c * UPSCALE;
-                out[row..row + UPSCALE].fill(v);
-            }
-        }
-    }
+    upsample(pano, out, |x| (x - min) / span - mean);
 }
 
 /// One Doppler panorama -> one 64 x 256 model image: nearest-neighbour x4, each value
 /// `clamp(v / DOPPLER_SCALE_MPS, -1, 1)` (no dataset statistics: the scale is fixed).
 pub fn expand_doppler(doppler: &[f32; PANO_LEN], out: &mut [f32]) {
+    upsample(doppler, out, |v| (v / DOPPLER_SCALE_MPS).clamp(-1.0, 1.0));
+}
+
+/// Each bin of `pano`, mapped by `f`, as a 4 x 4 block of the 64 x 256 image `out`.
+fn upsample(pano: &[f32; PANO_LEN], out: &mut [f32], f: impl Fn(f32) -> f32) {
     debug_assert_eq!(out.len(), IMG_H * IMG_W);
     for r in 0..PANO_H {
         for c in 0..PANO_W {
-            let v = (doppler[r * PANO_W + c] / DOPPLER_SCALE_MPS).clamp(-1.0, 1.0);
+            let v = f(pano[r * PANO_W + c]);
             for i in 0..UPSCALE {
                 let row = (r * UPSCALE + i) * IMG_W + c * UPSCALE;
                 out[row..row + UPSCALE].fill(v);
