@@ -53,6 +53,10 @@ pub struct Config {
     /// velocity is then off by about `|v| direction_sigma`, which adds to `sigma` in the
     /// covariance of the estimate (not in the inlier gate, which would let ghosts in).
     pub direction_sigma: f32,
+    /// Count the rounding of a coarse Doppler step as shared by a frame's points where the noise
+    /// cannot dither it (default on; see [`quantisation_correlation`]). Off: every point's
+    /// rounding is independent (`step / sqrt(12)` each, averaged over the points).
+    pub quantisation_correlation: bool,
     /// Inlier threshold as a multiple of the effective noise.
     pub inlier_sigmas: f32,
     /// Minimum inliers to accept a solution.
@@ -120,6 +124,7 @@ impl Default for Config {
             step_from_data: true,
             seed: 0x5EED,
             direction_sigma: 0.3,
+            quantisation_correlation: true,
         }
     }
 }
@@ -368,6 +373,7 @@ impl EgoVelocityEstimator {
 
         let thresh = f64::from(cfg.inlier_threshold());
         let (s0, sd) = (f64::from(cfg.doppler_std()), f64::from(cfg.direction_sigma));
+        let s_noise = f64::from(cfg.sigma.max(0.0));
         // Inliers are chosen with the Doppler noise and quantisation alone (a wider gate lets
         // ghosts in); the direction errors enter the covariance.
         let thresh_for = |_v: &Vector3<f64>| thresh;
@@ -523,9 +529,18 @@ impl EgoVelocityEstimator {
         if cfg.model == Model::Planar {
             dtd[(2, 2)] = 1.0;
         }
+        // Rounding the points' noise cannot dither is nearly the same function of the velocity
+        // for every point of the frame: that share does not shrink with the point count.
+        let step = f64::from(cfg.doppler_step.max(0.0));
+        let shared = if cfg.quantisation_correlation {
+            let noise = (s_noise * s_noise + (v.norm() * sd).powi(2)).sqrt();
+            quantisation_correlation(step, noise) * step * step / 12.0 * inl.len() as f64
+        } else {
+            0.0
+        };
         let cov = dtd
             .try_inverse()
-            .map(|m| m * sigma * sigma)
+            .map(|m| m * (sigma * sigma + shared))
             .unwrap_or_else(Matrix3::zeros);
         est.velocity = [v.x as f32, v.y as f32, v.z as f32];
         for r in 0..3 {
@@ -544,6 +559,24 @@ impl EgoVelocityEstimator {
         }
         self.inl = inl;
     }
+}
+
+/// How much of a Doppler quantisation step's rounding error the noise leaves tied to the
+/// signal, 0-1: `exp(-2 pi^2 noise^2 / step^2)`, the magnitude of the noise's characteristic
+/// function at the lattice's frequency `2 pi / step` (Widrow's quantisation theory). Gaussian noise
+/// of a third of a step or more (0.03 or less) makes the rounding errors of different points
+/// independent, uniform over a step, and a frame's least squares averages them; with less noise a
+/// point's rounding is set by its true radial velocity, so at low speed a frame's points round
+/// alike (a slow radar with 0.38 m/s steps reads most static points as 0) and the frame carries
+/// that error whatever its point count. `noise` is the points' Doppler noise before rounding
+/// \[m/s\] (Doppler noise and direction errors at the frame's speed); `step` \[m/s\], 0 for continuous
+/// Doppler (0 returned).
+pub fn quantisation_correlation(step: f64, noise: f64) -> f64 {
+    if step <= 0.0 || !step.is_finite() {
+        return 0.0;
+    }
+    let r = noise.max(0.0) / step;
+    (-2.0 * core::f64::consts::PI.powi(2) * r * r).exp()
 }
 
 /// Least squares for `v` in `vr_i = -d_i . v` over the given points.

@@ -308,3 +308,64 @@ fn weights_pick_the_points_seen_again_over_a_larger_set_seen_once() {
     est.estimate_weighted_into(&dets, Some(&odd[..20]), None, &mut out);
     assert!(out.is_ok());
 }
+
+#[test]
+fn a_coarse_doppler_step_at_low_speed_widens_the_covariance_to_the_rounding_it_cannot_average() {
+    // A slow radar (0.1-0.3 m/s) with 0.38 m/s Doppler steps and little noise: most static points
+    // read 0 or one step, and the rounding errors of a frame's points are nearly the same function
+    // of the velocity, so they do not average out over the points. A covariance that divides the
+    // rounding by the point count claims a precision the frame does not have.
+    let step = 0.38f32;
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let quantised = |dets: &mut Vec<Detection>| {
+        for d in dets.iter_mut() {
+            d.radial_velocity = (d.radial_velocity / step).round() * step;
+        }
+    };
+    let mut coarse = EgoVelocityEstimator::new(cfg().with_velocity_resolution(f64::from(step)));
+    let (mut nees_sum, mut n) = (0.0, 0);
+    for _ in 0..300 {
+        let speed = rng.gen_range(0.1..0.3);
+        let az: f64 = rng.gen_range(-1.0..1.0);
+        let v = [speed * az.sin(), speed * az.cos(), 0.0];
+        let (mut dets, _) = frame(&mut rng, v, 40, 0.0, 20.0);
+        quantised(&mut dets);
+        let e = coarse.estimate(&dets);
+        if e.is_ok() {
+            nees_sum += nees(&e, v);
+            n += 1;
+        }
+    }
+    assert!(n > 200, "{n} of 300 frames gave a velocity");
+    let mean = nees_sum / f64::from(n);
+    assert!(
+        (0.5..6.0).contains(&mean),
+        "mean NEES {mean} over {n} slow coarse frames (3 is consistent)"
+    );
+
+    // Fast motion dithers the rounding: the covariance keeps the per-point rounding deviation
+    // (step / sqrt(12)) divided over the points, as for fine steps.
+    let fast = [0.6, 1.3, 0.1];
+    let (mut dets, _) = frame(&mut rng, fast, 40, 0.0, 20.0);
+    for d in dets.iter_mut() {
+        d.radial_velocity += rng.gen_range(-0.3f32..0.3);
+    }
+    quantised(&mut dets);
+    let mut dithered = EgoVelocityEstimator::new(Config {
+        direction_sigma: 0.3,
+        ..cfg().with_velocity_resolution(f64::from(step))
+    });
+    let e = dithered.estimate(&dets);
+    assert!(e.is_ok(), "{:?}", e.status);
+    let mut plain = EgoVelocityEstimator::new(Config {
+        direction_sigma: 0.3,
+        quantisation_correlation: false,
+        ..cfg().with_velocity_resolution(f64::from(step))
+    });
+    let p = plain.estimate(&dets);
+    let ratio = f64::from(e.covariance[1][1]) / f64::from(p.covariance[1][1]);
+    assert!(
+        (1.0..1.05).contains(&ratio),
+        "dithered frame's forward variance {ratio}x the independent-rounding one"
+    );
+}
