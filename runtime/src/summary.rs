@@ -65,7 +65,7 @@ pub struct RunSummary {
 }
 
 /// What the error-state filter did with each kind of measurement (docs/odometry.md).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct FilterSummary {
     /// Radar ego-velocities applied.
     pub radar_updates: u64,
@@ -96,6 +96,11 @@ pub struct FilterSummary {
     /// Points of those frames seen for the first time (the lower weight).
     #[serde(default)]
     pub points_fresh: u64,
+    /// Mean normalised innovation square of the applied radar ego-velocities (3 degrees of
+    /// freedom: 3 when the stated Doppler noise fits the radar; well below, the filter trusts the
+    /// radar less than it could; above, more than it should). None before the first update.
+    #[serde(default)]
+    pub radar_nis_mean: Option<f64>,
 }
 
 impl From<milliego_odometry::rio::RioCounters> for FilterSummary {

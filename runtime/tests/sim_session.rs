@@ -176,6 +176,10 @@ fn offline_run_reproduces_milliego_odometry_with_a_barometer() {
         (o.baro_updates, o.baro_rejected, o.baro_reanchors)
     );
     assert_eq!((f.radar_updates, f.radar_gated), (o.updates, o.gated));
+    // The radar updates' consistency, as `milliego odometry` reports it.
+    let nis = f.radar_nis_mean.expect("radar updates were applied");
+    assert!(nis > 0.0 && nis.is_finite(), "{f:?}");
+    assert_eq!(Some(nis), o.nis_mean);
 }
 
 #[test]

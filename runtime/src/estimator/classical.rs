@@ -71,6 +71,7 @@ impl Estimator for Classical {
                 frames_weighed: p.frames,
                 points_seen_again: p.seen_again,
                 points_fresh: p.fresh,
+                radar_nis_mean: self.runner.filter().and_then(|f| f.nis_mean()),
                 ..self.runner.filter_counters().into()
             }
         })
