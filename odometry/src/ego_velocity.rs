@@ -564,7 +564,7 @@ impl EgoVelocityEstimator {
 /// How much of a Doppler quantisation step's rounding error the noise leaves tied to the
 /// signal, 0-1: `exp(-2 pi^2 noise^2 / step^2)`, the magnitude of the noise's characteristic
 /// function at the lattice's frequency `2 pi / step` (Widrow's quantisation theory). Gaussian noise
-/// of a third of a step or more (0.03 or less) makes the rounding errors of different points
+/// of 0.4 of a step or more (0.04 or less) makes the rounding errors of different points
 /// independent, uniform over a step, and a frame's least squares averages them; with less noise a
 /// point's rounding is set by its true radial velocity, so at low speed a frame's points round
 /// alike (a slow radar with 0.38 m/s steps reads most static points as 0) and the frame carries
