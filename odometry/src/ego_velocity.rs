@@ -373,11 +373,12 @@ impl EgoVelocityEstimator {
 
         let thresh = f64::from(cfg.inlier_threshold());
         let (s0, sd) = (f64::from(cfg.doppler_std()), f64::from(cfg.direction_sigma));
-        let s_noise = f64::from(cfg.sigma.max(0.0));
         // Inliers are chosen with the Doppler noise and quantisation alone (a wider gate lets
         // ghosts in); the direction errors enter the covariance.
         let thresh_for = |_v: &Vector3<f64>| thresh;
-        let sigma_eff = |v: &Vector3<f64>| (s0 * s0 + (v.norm() * sd).powi(2)).sqrt();
+        // A point's Doppler deviation `s` plus what direction errors add at speed `|v|`.
+        let with_direction = |s: f64, v: &Vector3<f64>| (s * s + (v.norm() * sd).powi(2)).sqrt();
+        let sigma_eff = |v: &Vector3<f64>| with_direction(s0, v);
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
         // (voting inliers, their weight, truncated cost, hypothesis)
         let mut best: Option<(usize, f64, f64, Vector3<f64>)> = None;
@@ -533,7 +534,8 @@ impl EgoVelocityEstimator {
         // for every point of the frame: that share does not shrink with the point count.
         let step = f64::from(cfg.doppler_step.max(0.0));
         let shared = if cfg.quantisation_correlation {
-            let noise = (s_noise * s_noise + (v.norm() * sd).powi(2)).sqrt();
+            // The noise before rounding: the Doppler noise without the rounding's own floor.
+            let noise = with_direction(f64::from(cfg.sigma.max(0.0)), &v);
             quantisation_correlation(step, noise) * step * step / 12.0 * inl.len() as f64
         } else {
             0.0
