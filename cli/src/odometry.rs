@@ -88,6 +88,12 @@ pub struct OdometryArgs {
     /// (docs/odometry.md, "Points seen again"); keep it off a multiple of the frame period
     #[arg(long, value_name = "SECONDS")]
     persist_window: Option<f64>,
+    /// Radar updates over which the filter adapts the scale of the radar velocity covariance
+    /// (default 300; 0: off, the covariance as the ego-velocity stage states it; docs/odometry.md
+    /// "Radar noise adaptation"). The JSON's `filter.radar_noise_scale` gives the scale it
+    /// ended with.
+    #[arg(long, value_name = "N")]
+    radar_noise_window: Option<f64>,
 }
 
 fn parse_time_offset(s: &str) -> std::result::Result<TimeOffsetMode, String> {
@@ -137,6 +143,9 @@ pub fn run(a: OdometryArgs) -> Result<()> {
     if let Some(w) = a.persist_window {
         cfg.persist.window_s = w.max(0.0);
     }
+    if let Some(n) = a.radar_noise_window {
+        cfg.rio.radar_noise_window = n.max(0.0);
+    }
     if let Some(w) = a.stack_window {
         cfg.stack_window_s = w.max(0.0);
     }
@@ -152,7 +161,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
             "poses": r.trajectory.len(), "radar_frames": r.radar_frames, "imu_samples": r.imu_samples,
             "ego_velocity": {"ok": r.ego_ok, "degenerate": r.ego_degenerate, "too_few_points": r.ego_too_few, "no_consensus": r.ego_no_consensus, "stacked": r.ego_stacked},
             "points_seen_again": {"frames": r.persist.frames, "seen_again": r.persist.seen_again, "fresh": r.persist.fresh},
-            "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "vertical_bounds": r.vertical_bounds, "horizontal_bounds": r.horizontal_bounds, "nis_mean": r.nis_mean},
+            "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "vertical_bounds": r.vertical_bounds, "horizontal_bounds": r.horizontal_bounds, "nis_mean": r.nis_mean, "radar_noise_scale": r.radar_noise_scale},
             "barometer": if r.pressure_readings == 0 { json!("none in the session: height from radar and IMU only") } else if a.no_barometer { json!(format!("{} readings ignored (--no-barometer)", r.pressure_readings)) } else { json!({"readings": r.pressure_readings, "updates": r.baro_updates, "rejected": r.baro_rejected, "reanchors": r.baro_reanchors}) },
             "doppler_step": doppler_step_json(r.doppler_step, a.doppler_step.is_some()),
             "imu_noise": r.imu_noise,

@@ -94,6 +94,12 @@ pub struct RunArgs {
     /// The summary's `filter` block counts the points seen again.
     #[arg(long, value_name = "SECONDS")]
     persist_window: Option<f64>,
+    /// Radar updates over which the filter adapts the scale of the radar velocity covariance
+    /// (as `odometry --radar-noise-window`; default 300; 0: off, the covariance as the
+    /// ego-velocity stage states it; docs/odometry.md "Radar noise adaptation"). The summary's
+    /// `filter.radar_noise_scale` gives the scale it ended with.
+    #[arg(long, value_name = "N")]
+    radar_noise_window: Option<f64>,
     /// Stop after this many seconds.
     #[arg(long)]
     duration: Option<f64>,
@@ -317,6 +323,9 @@ pub fn run(a: RunArgs) -> Result<()> {
     cfg.classical.rio.radar_heading = a.radar_heading;
     if let Some(w) = a.persist_window {
         cfg.classical.persist.window_s = w.max(0.0);
+    }
+    if let Some(n) = a.radar_noise_window {
+        cfg.classical.rio.radar_noise_window = n.max(0.0);
     }
     if let Some(p) = &file.extrinsics.radar {
         cfg.classical.mounting.radar = place(p);

@@ -116,6 +116,10 @@ pub struct ScoreArgs {
     /// (default: the shipped setting, docs/odometry.md; 0: off).
     #[arg(long, value_name = "S")]
     stack_window: Option<f64>,
+    /// Radar updates over which the filter adapts the scale of the radar velocity covariance
+    /// (default: the shipped setting, 300; 0: off; docs/odometry.md "Radar noise adaptation").
+    #[arg(long, value_name = "N")]
+    radar_noise_window: Option<f64>,
     /// Let the radar updates correct the heading and the gyro bias about the vertical (default:
     /// off, the heading from the gyro; docs/odometry.md "Heading comes from the gyro").
     #[arg(long)]
@@ -315,6 +319,9 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         classical.persist.window_s = w.max(0.0);
     }
     classical.rio.radar_heading |= a.radar_heading;
+    if let Some(n) = a.radar_noise_window {
+        classical.rio.radar_noise_window = n.max(0.0);
+    }
     // Per runtime column: learned measurements applied, evaluated, NIS sum; sessions handed over.
     let mut learned_use: Vec<(u64, u64, f64, usize)> = vec![(0, 0, 0.0, 0); estimators.len()];
     let mut per: Vec<(String, Vec<SessionScore>)> = estimators
@@ -352,6 +359,8 @@ pub fn run(a: ScoreArgs) -> Result<()> {
                         ..OfflineConfig::default()
                     };
                     cfg.rio.radar_heading = classical.rio.radar_heading;
+                    cfg.rio.radar_noise_window = classical.rio.radar_noise_window;
+                    cfg.rio.radar_noise_scale_bounds = classical.rio.radar_noise_scale_bounds;
                     // What the rig's operator knows and says (`odometry --vehicle`): a car.
                     let cfg = if vehicle { cfg.ground_vehicle() } else { cfg };
                     run_offline(&s, &cfg)?.trajectory

@@ -187,6 +187,9 @@ pub struct OfflineResult {
     pub horizontal_bounds: u64,
     /// Mean normalised innovation square of the applied radar updates (3 when consistent).
     pub nis_mean: Option<f64>,
+    /// The scale the filter applied to the radar velocity covariances at the end of the run
+    /// ([`crate::rio::RioConfig::radar_noise_window`]; 1 when not adapted or no filter ran).
+    pub radar_noise_scale: f64,
     /// Barometer readings in the session.
     pub pressure_readings: usize,
     /// Barometric heights applied and rejected by the filter.
@@ -397,6 +400,7 @@ pub fn run_with_motions(
         vertical_bounds: filter.vertical_bounds,
         horizontal_bounds: filter.horizontal_bounds,
         nis_mean: runner.filter().and_then(|f| f.nis_mean()),
+        radar_noise_scale: runner.filter().map_or(1.0, |f| f.radar_noise_scale()),
         pressure_readings: baro.len(),
         baro_updates: filter.baro_updates,
         baro_rejected: filter.baro_rejected,

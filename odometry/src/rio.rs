@@ -113,6 +113,17 @@ pub struct RioConfig {
     /// vertical velocity are 0 with this deviation (a car does not slide sideways or lift off;
     /// [`Rio::set_vehicle_frame`] places that frame); `f64::INFINITY`: not a ground vehicle.
     pub nonholonomic_std: f64,
+    /// Radar noise adaptation: the number of applied radar updates \[frames\] over which the
+    /// filter estimates one scale `alpha` of the ego-velocity covariances it is given (their
+    /// covariance becomes `alpha C`), by recursive maximum likelihood on the innovations; 0
+    /// (the default): off, the covariance as given. A radar whose noise differs from what the
+    /// ego-velocity stage assumes (angle bins, clutter, a coarser Doppler) would otherwise be
+    /// over- or under-trusted for the whole run. Updates taken without the gate (a re-anchoring)
+    /// do not count. (At rest the runner gives no radar velocities: the zero-velocity update
+    /// stands in.)
+    pub radar_noise_window: f64,
+    /// Bounds of the radar noise scale (`[min, max]`), see [`RioConfig::radar_noise_window`].
+    pub radar_noise_scale_bounds: [f64; 2],
 }
 
 /// IMU noise presets for the filter's process noise, from the parts' datasheets (white noise
@@ -240,6 +251,8 @@ impl Default for RioConfig {
             time_offset_walk: 1e-4,
             nonholonomic_std: f64::INFINITY,
             gap_accel_std: 1.0,
+            radar_noise_window: 300.0,
+            radar_noise_scale_bounds: [1.0, 10.0],
         }
     }
 }
@@ -424,6 +437,10 @@ pub struct Rio {
     gated_run: u32,
     /// Sum of the applied radar updates' normalised innovation squares (3 dof each).
     nis_sum: f64,
+    /// Scale of the radar velocity covariances (1 unless adapted, [`RioConfig::radar_noise_window`]).
+    noise_scale: f64,
+    /// Fisher information about [`Rio::noise_scale`] gathered so far (forgotten over the window).
+    noise_information: f64,
     /// Barometer bias \[m\] (barometric height minus the filter's), once a reading came.
     baro_bias: Option<f64>,
     /// The IMU's sample interval \[s\] (the shortest recent one; gaps do not move it).
@@ -473,6 +490,8 @@ impl Rio {
             started: false,
             gated_run: 0,
             nis_sum: 0.0,
+            noise_scale: 1.0,
+            noise_information: 0.0,
             baro_bias: None,
             baro_rejected_run: None,
             nominal_dt: 0.0,
@@ -920,7 +939,9 @@ impl Rio {
         let r_wr = (self.nav.state().q * self.mount.rotation)
             .to_rotation_matrix()
             .into_inner();
-        let c = r_wr * Matrix3::from_fn(|i, j| m.covariance[i][j]) * r_wr.transpose();
+        let c = r_wr
+            * Matrix3::from_fn(|i, j| m.covariance[i][j] * self.noise_scale)
+            * r_wr.transpose();
         let std = self.cfg.vertical_velocity_std;
         self.bound_velocity(c[(2, 2)] > std * std);
     }
@@ -943,7 +964,8 @@ impl Rio {
             pred += shift;
             h.set_column(TD, &rate);
         }
-        let rm = Matrix3::from_fn(|i, j| m.covariance[i][j]) + self.timing_covariance();
+        let given = Matrix3::from_fn(|i, j| m.covariance[i][j]);
+        let rm = given * self.noise_scale + self.timing_covariance();
         let y = Vector3::from(m.velocity) - pred;
         let s = h * self.p * h.transpose() + rm;
         let Some(si) = s.try_inverse() else {
@@ -975,9 +997,47 @@ impl Rio {
             return self.update_gated(m, false);
         }
         self.gated_run = 0;
+        if gate {
+            self.adapt_noise(&y, &si, &given);
+        }
         self.correct(&y, &h, &rm, &si, !self.cfg.radar_heading);
         self.counters.updates += 1;
         self.nis_sum += d2;
+    }
+
+    /// One step of recursive maximum likelihood for the radar noise scale `alpha`
+    /// ([`RioConfig::radar_noise_window`]), in `ln alpha` so that a step means the same at any
+    /// scale: with the innovation `y`, its covariance's inverse `si` (`S = H P H^T + alpha C +
+    /// timing`) and the given covariance `c`, `B = S^-1 alpha C`; the log-likelihood's slope in
+    /// `ln alpha` is `(y^T B S^-1 y - tr B) / 2` and its Fisher information `tr(B^2) / 2` (3/2
+    /// for a frame whose innovation the radar's noise dominates, less where the filter's own
+    /// uncertainty does, which says little about the radar). The scale moves by the slope over the
+    /// information gathered (forgotten by `1 - 1 / window` per update).
+    fn adapt_noise(&mut self, y: &Vector3<f64>, si: &Matrix3<f64>, c: &Matrix3<f64>) {
+        let n = self.cfg.radar_noise_window;
+        if !(n.is_finite() && n >= 1.0) {
+            return;
+        }
+        let b = si * c * self.noise_scale;
+        let slope = 0.5 * ((y.transpose() * b * si * y)[(0, 0)] - b.trace());
+        let info = 0.5 * (b * b).trace();
+        if !(slope.is_finite() && info.is_finite() && info > 0.0) {
+            return;
+        }
+        // The prior: as sure of the given covariance as 20 frames the radar dominates.
+        if self.noise_information == 0.0 {
+            self.noise_information = 30.0;
+        }
+        self.noise_information = self.noise_information * (1.0 - 1.0 / n) + info;
+        let [lo, hi] = self.cfg.radar_noise_scale_bounds;
+        let ln = self.noise_scale.ln() + slope / self.noise_information;
+        self.noise_scale = ln.exp().clamp(lo, hi);
+    }
+
+    /// The scale the filter applies to the radar velocity covariances (1 unless
+    /// [`RioConfig::radar_noise_window`] adapts it).
+    pub fn radar_noise_scale(&self) -> f64 {
+        self.noise_scale
     }
 
     /// Normalised innovation square of a world-velocity innovation `y` \[m/s\] with measurement
@@ -1003,13 +1063,15 @@ impl Rio {
     }
 
     /// Zero-velocity pseudo-measurement: the body is at rest, its world velocity zero with
-    /// standard deviation `std` \[m/s\] per axis (see [`crate::rest`]).
+    /// standard deviation `std` \[m/s\] per axis (see [`crate::rest`]). A world velocity cannot
+    /// observe heading (rotating the state about the vertical leaves zero zero), so, as for the
+    /// radar updates, its gain leaves the heading alone unless [`RioConfig::radar_heading`].
     pub fn zero_velocity(&mut self, std: f64) {
         let mut h = M3xN::zeros();
         h.fixed_view_mut::<3, 3>(0, 3)
             .copy_from(&Matrix3::identity());
         let y = -self.nav.state().v;
-        self.pseudo(&y, &h, std);
+        self.pseudo(&y, &h, std, !self.cfg.radar_heading);
     }
 
     /// Whether the filter's velocity is consistent with rest: zero within its covariance plus
@@ -1022,13 +1084,14 @@ impl Rio {
     }
 
     /// Position-hold pseudo-measurement: at rest the position is `anchor` \[m\] (where the rest
-    /// began) with standard deviation `std` \[m\] per axis.
+    /// began) with standard deviation `std` \[m\] per axis; heading kept out of the gain as for
+    /// [`Rio::zero_velocity`].
     pub fn hold_position(&mut self, anchor: Vector3<f64>, std: f64) {
         let mut h = M3xN::zeros();
         h.fixed_view_mut::<3, 3>(0, 0)
             .copy_from(&Matrix3::identity());
         let y = anchor - self.nav.state().p;
-        self.pseudo(&y, &h, std);
+        self.pseudo(&y, &h, std, !self.cfg.radar_heading);
     }
 
     /// Zero-rate pseudo-measurement: at rest the true rate of turn is zero, so the mean measured
@@ -1040,14 +1103,16 @@ impl Rio {
             .copy_from(&Matrix3::identity());
         let y = mean_gyro - self.nav.gyro_bias;
         let white = self.cfg.gyro_noise / span_s.max(1e-3).sqrt();
-        self.pseudo(&y, &h, white.max(std_min));
+        self.pseudo(&y, &h, white.max(std_min), false);
     }
 
-    fn pseudo(&mut self, y: &Vector3<f64>, h: &M3xN, std: f64) {
+    /// A rest pseudo-measurement `y` (Jacobian `h`, deviation `std` per axis); `keep_heading`
+    /// as in [`Rio::correct`].
+    fn pseudo(&mut self, y: &Vector3<f64>, h: &M3xN, std: f64, keep_heading: bool) {
         let rm = Matrix3::identity() * (std * std);
         let s = h * self.p * h.transpose() + rm;
         if let Some(si) = s.try_inverse() {
-            self.correct(y, h, &rm, &si, false);
+            self.correct(y, h, &rm, &si, keep_heading);
             self.counters.rest_updates += 1;
         }
     }

@@ -54,9 +54,21 @@ impl Noise {
     }
 }
 
-#[test]
-fn follows_a_walk_and_beats_dead_reckoning() {
-    let cfg = RioConfig::default();
+/// One run of the synthetic walk: the filter, the dead-reckoning end error \[m\], the path \[m\]
+/// and the mean velocity NEES after 5 s.
+struct Walk {
+    rio: Rio,
+    accel_bias: Vector3<f64>,
+    rio_err: f64,
+    dr_err: f64,
+    path: f64,
+    nees: f64,
+    frames: usize,
+}
+
+/// The 60 s walk with radar velocities of noise `radar_sigma` \[m/s\] per axis, stated to the
+/// filter as `stated_sigma`.
+fn walk(cfg: RioConfig, radar_sigma: f64, stated_sigma: f64) -> Walk {
     let (imu_hz, radar_hz, duration) = (200.0, 20.0, 60.0);
     let accel_bias = Vector3::new(0.05, -0.03, 0.02);
     let gyro_bias = Vector3::new(0.002, -0.001, 0.0005);
@@ -64,7 +76,6 @@ fn follows_a_walk_and_beats_dead_reckoning() {
         rotation: UnitQuaternion::from_euler_angles(0.0, 0.0, 10f64.to_radians()),
         translation: Vector3::new(0.05, 0.1, 0.02),
     };
-    let radar_sigma = 0.03;
     let mut noise = Noise {
         rng: ChaCha8Rng::seed_from_u64(42),
     };
@@ -104,7 +115,7 @@ fn follows_a_walk_and_beats_dead_reckoning() {
         if i % every == 0 && i > 0 {
             let vr = mount.rotation.inverse() * (q.inverse() * v + w.cross(&mount.translation))
                 + noise.vec(radar_sigma);
-            let c = radar_sigma * radar_sigma;
+            let c = stated_sigma * stated_sigma;
             rio.push_velocity(VelocityMeasurement {
                 t,
                 carried: false,
@@ -120,10 +131,30 @@ fn follows_a_walk_and_beats_dead_reckoning() {
         }
     }
     let (p_end, _) = truth(duration);
-    let rio_err = (rio.state().p - p_end).norm();
-    let dr_err = (dr.state().p - p_end).norm();
+    Walk {
+        rio_err: (rio.state().p - p_end).norm(),
+        dr_err: (dr.state().p - p_end).norm(),
+        rio,
+        accel_bias,
+        path,
+        nees: nees_sum / f64::from(nees_n),
+        frames: n / every,
+    }
+}
+
+#[test]
+fn follows_a_walk_and_beats_dead_reckoning() {
+    let Walk {
+        rio,
+        accel_bias,
+        rio_err,
+        dr_err,
+        path,
+        nees: mean_nees,
+        frames,
+    } = walk(RioConfig::default(), 0.03, 0.03);
     let c = rio.counters();
-    assert_eq!((c.updates + c.gated) as usize, n / every, "{c:?}");
+    assert_eq!((c.updates + c.gated) as usize, frames, "{c:?}");
     assert!(c.gated <= 2, "{c:?}");
     assert!(
         rio_err < 0.02 * path,
@@ -138,12 +169,77 @@ fn follows_a_walk_and_beats_dead_reckoning() {
         (ba - accel_bias).norm() < 0.6 * accel_bias.norm(),
         "accel bias estimate {ba:?} vs {accel_bias:?}"
     );
-    let mean_nees = nees_sum / f64::from(nees_n);
     println!(
-        "path {path:.1} m: RIO end error {rio_err:.3} m, dead reckoning {dr_err:.1} m, accel bias error {:.4} m/s^2, velocity NEES {mean_nees:.2}, {c:?}",
-        (ba - accel_bias).norm()
+        "path {path:.1} m: RIO end error {rio_err:.3} m, dead reckoning {dr_err:.1} m, accel bias error {:.4} m/s^2, velocity NEES {mean_nees:.2}, radar noise scale {:.3}, {c:?}",
+        (ba - accel_bias).norm(),
+        rio.radar_noise_scale()
     );
     assert!((0.3..9.0).contains(&mean_nees), "velocity NEES {mean_nees}");
+    // The stated noise is right: the scale stays near 1.
+    assert!(rio.radar_noise_scale() < 1.3, "{}", rio.radar_noise_scale());
+}
+
+#[test]
+fn a_radar_noisier_than_stated_is_found_and_its_covariance_scaled() {
+    // Noise 0.06 m/s stated as 0.02: the covariance is 9x too small.
+    let cfg = RioConfig::default();
+    let fixed = walk(
+        RioConfig {
+            radar_noise_window: 0.0,
+            ..cfg
+        },
+        0.06,
+        0.02,
+    );
+    let adapted = walk(cfg, 0.06, 0.02);
+    // The same radar stated right.
+    let right = walk(
+        RioConfig {
+            radar_noise_window: 0.0,
+            ..cfg
+        },
+        0.06,
+        0.06,
+    );
+    let scale = adapted.rio.radar_noise_scale();
+    println!(
+        "noise scale {scale:.2} (9 is right); velocity NEES {:.2} as stated, {:.2} adapted, {:.2} stated right; end error {:.3} / {:.3} / {:.3} m",
+        fixed.nees, adapted.nees, right.nees, fixed.rio_err, adapted.rio_err, right.rio_err
+    );
+    assert_eq!(fixed.rio.radar_noise_scale(), 1.0);
+    assert!((6.0..10.0).contains(&scale), "noise scale {scale}");
+    // Over-confident as stated (41 against 4.9 when stated right); once scaled, within twice
+    // the filter stated right (7.5).
+    assert!(
+        fixed.nees > 4.0 * right.nees,
+        "velocity NEES as stated {} against {}",
+        fixed.nees,
+        right.nees
+    );
+    assert!(
+        adapted.nees < 2.0 * right.nees,
+        "velocity NEES adapted {} against {}",
+        adapted.nees,
+        right.nees
+    );
+}
+
+#[test]
+fn a_radar_quieter_than_stated_keeps_its_stated_covariance() {
+    // The stated covariance is a floor: a scale below 1 was measured and made the simulated
+    // sessions worse (docs/odometry.md, "Radar noise adaptation").
+    let w = walk(RioConfig::default(), 0.01, 0.03);
+    assert_eq!(w.rio.radar_noise_scale(), 1.0);
+    let free = walk(
+        RioConfig {
+            radar_noise_scale_bounds: [0.01, 10.0],
+            ..RioConfig::default()
+        },
+        0.01,
+        0.03,
+    );
+    let s = free.rio.radar_noise_scale();
+    assert!((0.05..0.3).contains(&s), "noise scale {s} (1/9 is right)");
 }
 
 #[test]
@@ -240,4 +336,71 @@ fn a_barometer_rejected_for_a_second_re_anchors_the_height() {
     let c = *rio.counters();
     assert_eq!(c.baro_reanchors, 0, "{c:?}");
     assert!(c.baro_rejected > 0 && rio.state().p.z.abs() < 0.1, "{c:?}");
+}
+
+/// A filter that accelerated forward at 8 m/s^2 for 2 s without radar (its yaw error now correlated with
+/// its position error), given a zero-velocity and a position-hold update: the largest rotation
+/// either update applied about the world vertical \[rad\], and the largest in all \[rad\].
+fn rest_after_acceleration(radar_heading: bool) -> (f64, f64) {
+    let cfg = RioConfig {
+        radar_heading,
+        // Yaw, not tilt, uncertain: the lateral position error is mostly heading.
+        init_gyro_bias_std: 0.05,
+        init_tilt_std: 0.002,
+        ..RioConfig::default()
+    };
+    let g = [0.0, 0.0, STANDARD_GRAVITY];
+    let mut rio = Rio::levelled(cfg, RadarMount::default(), 0.0, g);
+    for k in 0..=400 {
+        rio.push_imu(ImuSample {
+            t: f64::from(k) * 0.005,
+            accel: [8.0, 0.0, STANDARD_GRAVITY],
+            gyro: [0.0, 0.0, 0.02],
+        });
+    }
+    let p = rio.covariance();
+    assert!(
+        p[(1, 8)].abs() > 1e-6,
+        "no position-yaw correlation to test with: {}",
+        p[(1, 8)]
+    );
+    // Each update on its own copy of the filter.
+    let turn = |update: &dyn Fn(&mut Rio)| {
+        let mut r = rio.clone();
+        update(&mut r);
+        (r.state().q * rio.state().q.inverse()).scaled_axis()
+    };
+    let a = turn(&|r| r.zero_velocity(0.01));
+    // Held 0.5 m to the left of where the filter is: across the motion, where yaw shows.
+    let b = turn(&|r| {
+        let anchor = r.state().p + Vector3::new(0.0, 0.5, 0.0);
+        r.hold_position(anchor, 0.01)
+    });
+    (
+        if a.z.abs() > b.z.abs() { a.z } else { b.z },
+        a.norm().max(b.norm()),
+    )
+}
+
+#[test]
+fn rest_updates_leave_the_heading_to_the_gyro() {
+    // A world velocity or position cannot observe heading: a rest taken in motion (a false
+    // rest) must not turn it through the velocity-yaw correlation.
+    let (about_vertical, all) = rest_after_acceleration(false);
+    println!("kept: {about_vertical:.2e} rad about the vertical of {all:.2e} rad");
+    assert!(
+        all > 1e-3,
+        "the rest corrected the attitude by only {all:.2e} rad"
+    );
+    assert!(
+        about_vertical.abs() < 1e-9,
+        "heading moved {about_vertical:.3e} rad"
+    );
+    // With the radar allowed to correct heading, rests may too (the correlation is real).
+    let (about_vertical, all) = rest_after_acceleration(true);
+    println!("free: {about_vertical:.2e} rad about the vertical of {all:.2e} rad");
+    assert!(
+        about_vertical.abs() > 5e-3,
+        "heading moved only {about_vertical:.3e} rad"
+    );
 }

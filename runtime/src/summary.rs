@@ -101,6 +101,11 @@ pub struct FilterSummary {
     /// radar less than it could; above, more than it should). None before the first update.
     #[serde(default)]
     pub radar_nis_mean: Option<f64>,
+    /// The scale the filter applies, at the end of the run, to the covariances of the radar
+    /// ego-velocities (1: as stated; above: the innovations said the radar is noisier than
+    /// stated, docs/odometry.md "Radar noise adaptation"). None when no filter ran.
+    #[serde(default)]
+    pub radar_noise_scale: Option<f64>,
 }
 
 impl From<milliego_odometry::rio::RioCounters> for FilterSummary {

@@ -180,6 +180,8 @@ fn offline_run_reproduces_milliego_odometry_with_a_barometer() {
     let nis = f.radar_nis_mean.expect("radar updates were applied");
     assert!(nis > 0.0 && nis.is_finite(), "{f:?}");
     assert_eq!(Some(nis), o.nis_mean);
+    // And the radar noise scale it ended with.
+    assert_eq!(f.radar_noise_scale, Some(o.radar_noise_scale));
 }
 
 #[test]

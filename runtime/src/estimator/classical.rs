@@ -72,6 +72,7 @@ impl Estimator for Classical {
                 points_seen_again: p.seen_again,
                 points_fresh: p.fresh,
                 radar_nis_mean: self.runner.filter().and_then(|f| f.nis_mean()),
+                radar_noise_scale: self.runner.filter().map(|f| f.radar_noise_scale()),
                 ..self.runner.filter_counters().into()
             }
         })
