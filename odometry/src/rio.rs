@@ -115,14 +115,17 @@ pub struct RioConfig {
     pub nonholonomic_std: f64,
     /// Radar noise adaptation: the number of applied radar updates \[frames\] over which the
     /// filter estimates one scale `alpha` of the ego-velocity covariances it is given (their
-    /// covariance becomes `alpha C`), by recursive maximum likelihood on the innovations; 0
-    /// (the default): off, the covariance as given. A radar whose noise differs from what the
-    /// ego-velocity stage assumes (angle bins, clutter, a coarser Doppler) would otherwise be
-    /// over- or under-trusted for the whole run. Updates taken without the gate (a re-anchoring)
-    /// do not count. (At rest the runner gives no radar velocities: the zero-velocity update
-    /// stands in.)
+    /// covariance becomes `alpha C`), by recursive maximum likelihood on the innovations
+    /// (default 300: 15 s at 20 Hz, chosen on the validation sets, docs/odometry.md "Radar noise
+    /// adaptation"; 0: off, the covariance as given). A radar noisier than the ego-velocity
+    /// stage assumes (clutter that passes the consensus, multipath, coarse angle cells) would
+    /// otherwise be over-trusted for the whole run. Updates taken without the gate (a
+    /// re-anchoring) do not count. (At rest the runner gives no radar velocities: the
+    /// zero-velocity update stands in.)
     pub radar_noise_window: f64,
-    /// Bounds of the radar noise scale (`[min, max]`), see [`RioConfig::radar_noise_window`].
+    /// Bounds of the radar noise scale (`[min, max]`, default `[1, 10]`: the stated covariance
+    /// is a floor; a scale below 1 fitted the simulator's walks and lost on the training set),
+    /// see [`RioConfig::radar_noise_window`].
     pub radar_noise_scale_bounds: [f64; 2],
 }
 
