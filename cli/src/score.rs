@@ -358,9 +358,8 @@ pub fn run(a: ScoreArgs) -> Result<()> {
                         persist: classical.persist,
                         ..OfflineConfig::default()
                     };
-                    cfg.rio.radar_heading = classical.rio.radar_heading;
-                    cfg.rio.radar_noise_window = classical.rio.radar_noise_window;
-                    cfg.rio.radar_noise_scale_bounds = classical.rio.radar_noise_scale_bounds;
+                    // The filter's settings as the runtime columns get them.
+                    cfg.rio = classical.rio;
                     // What the rig's operator knows and says (`odometry --vehicle`): a car.
                     let cfg = if vehicle { cfg.ground_vehicle() } else { cfg };
                     run_offline(&s, &cfg)?.trajectory
