@@ -175,6 +175,11 @@ pub struct Estimate {
     pub velocity: [f32; 3],
     /// Covariance of `velocity` \[m^2/s^2\], row-major 3x3.
     pub covariance: [[f32; 3]; 3],
+    /// The part of `covariance` that the frame's points share through the rounding of a coarse
+    /// Doppler step \[m^2/s^2\] ([`Config::quantisation_correlation`]): an error that does not
+    /// shrink with the point count, and lasts while the velocity stays within a fraction of a
+    /// step. Zeros for continuous Doppler.
+    pub shared_covariance: [[f32; 3]; 3],
     /// What the estimate is worth.
     pub status: Status,
     /// Points used in the final least squares.
@@ -201,6 +206,7 @@ impl Estimate {
         Estimate {
             velocity: [0.0; 3],
             covariance: [[0.0; 3]; 3],
+            shared_covariance: [[0.0; 3]; 3],
             status: Status::Ok,
             inliers: 0,
             usable: 0,
@@ -342,6 +348,7 @@ impl EgoVelocityEstimator {
         *out = Estimate {
             velocity: [0.0; 3],
             covariance: [[0.0; 3]; 3],
+            shared_covariance: [[0.0; 3]; 3],
             status: Status::Ok,
             inliers: 0,
             usable,
@@ -372,13 +379,12 @@ impl EgoVelocityEstimator {
         }
 
         let thresh = f64::from(cfg.inlier_threshold());
-        let (s0, sd) = (f64::from(cfg.doppler_std()), f64::from(cfg.direction_sigma));
+        let sd = f64::from(cfg.direction_sigma);
         // Inliers are chosen with the Doppler noise and quantisation alone (a wider gate lets
         // ghosts in); the direction errors enter the covariance.
         let thresh_for = |_v: &Vector3<f64>| thresh;
         // A point's Doppler deviation `s` plus what direction errors add at speed `|v|`.
         let with_direction = |s: f64, v: &Vector3<f64>| (s * s + (v.norm() * sd).powi(2)).sqrt();
-        let sigma_eff = |v: &Vector3<f64>| with_direction(s0, v);
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
         // (voting inliers, their weight, truncated cost, hypothesis)
         let mut best: Option<(usize, f64, f64, Vector3<f64>)> = None;
@@ -518,11 +524,25 @@ impl EgoVelocityEstimator {
             .map(|&i| (self.vr[i] + self.dirs[i].dot(&v)).powi(2))
             .sum();
         let rms = (ss / inl.len() as f64).sqrt();
+        let step = f64::from(cfg.doppler_step.max(0.0));
+        // The noise before rounding: the Doppler noise without the rounding's own floor, and what
+        // direction errors add at this speed.
+        let dither = with_direction(f64::from(cfg.sigma.max(0.0)), &v);
+        // How much of the rounding that noise leaves tied to the velocity, the same for every
+        // point of the frame (0 when off).
+        let tied = if cfg.quantisation_correlation {
+            quantisation_correlation(step, dither)
+        } else {
+            0.0
+        };
         // Noise: the residual spread, but never below the Doppler noise plus what direction
-        // errors add at this speed.
+        // errors add at this speed. The floor counts a point's own rounding (`step / sqrt(12)`)
+        // only as far as the noise dithers it: the tied part is counted once, shared, below.
+        let own = (1.0 - tied).sqrt() * f64::from(cfg.doppler_std());
+        let floor = with_direction(f64::from(cfg.sigma.max(0.0)).max(own), &v);
         let sigma = (ss / (inl.len().saturating_sub(dof).max(1)) as f64)
             .sqrt()
-            .max(sigma_eff(&v));
+            .max(floor);
         let mut dtd = Matrix3::zeros();
         for &i in &inl {
             dtd += self.dirs[i] * self.dirs[i].transpose();
@@ -532,25 +552,19 @@ impl EgoVelocityEstimator {
         }
         // Rounding the points' noise cannot dither is nearly the same function of the velocity
         // for every point of the frame: that share does not shrink with the point count.
-        let step = f64::from(cfg.doppler_step.max(0.0));
-        let shared = if cfg.quantisation_correlation {
-            // The noise before rounding: the Doppler noise without the rounding's own floor.
-            let noise = with_direction(f64::from(cfg.sigma.max(0.0)), &v);
-            quantisation_correlation(step, noise) * step * step / 12.0 * inl.len() as f64
-        } else {
-            0.0
-        };
-        let cov = dtd
-            .try_inverse()
-            .map(|m| m * (sigma * sigma + shared))
-            .unwrap_or_else(Matrix3::zeros);
+        let shared = tied * step * step / 12.0 * inl.len() as f64;
+        let dtd_inv = dtd.try_inverse().unwrap_or_else(Matrix3::zeros);
+        let cov = dtd_inv * (sigma * sigma + shared);
+        let cov_shared = dtd_inv * shared;
         est.velocity = [v.x as f32, v.y as f32, v.z as f32];
         for r in 0..3 {
             for c in 0..3 {
-                est.covariance[r][c] = if cfg.model == Model::Planar && (r == 2 || c == 2) {
+                let planar_z = cfg.model == Model::Planar && (r == 2 || c == 2);
+                est.covariance[r][c] = if planar_z { 0.0 } else { cov[(r, c)] as f32 };
+                est.shared_covariance[r][c] = if planar_z {
                     0.0
                 } else {
-                    cov[(r, c)] as f32
+                    cov_shared[(r, c)] as f32
                 };
             }
         }

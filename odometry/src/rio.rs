@@ -4,7 +4,7 @@
 //! Nominal state: position `p` and velocity `v` in the world frame, body-to-world rotation `q`,
 //! accelerometer bias `b_a`, gyroscope bias `b_g` (body = IMU frame), and, once a barometer
 //! reading came, the barometer bias `b_h` (barometric height minus the filter's). Error state
-//! (17): `dp, dv, dtheta` (body-frame rotation error, `q = q_hat * Exp(dtheta)`), `db_a`, `db_g`,
+//! (20): `dp, dv, dtheta` (body-frame rotation error, `q = q_hat * Exp(dtheta)`), `db_a`, `db_g`,
 //! `db_h` (zero variance until a barometer reading comes), and `dt_d`, the radar-to-IMU time
 //! offset (zero variance unless [`RioConfig::time_offset_std`] asks for it to be estimated).
 //!
@@ -24,12 +24,15 @@
 use crate::strapdown::{ImuSample, NavState, Strapdown};
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
 
-/// Error-state size: 15 inertial states, the barometer bias and the radar time offset.
-const N: usize = 17;
+/// Error-state size: 15 inertial states, the barometer bias, the radar time offset and the
+/// radar's shared rounding error.
+const N: usize = 20;
 /// Index of the barometer bias in the error state.
 const BARO: usize = 15;
 /// Index of the radar-to-IMU time offset in the error state.
 const TD: usize = 16;
+/// Index of the radar's shared rounding error (3, radar frame) in the error state.
+const RB: usize = 17;
 /// Largest radar-to-IMU time offset the filter estimates \[s\].
 const MAX_TIME_OFFSET_S: f64 = 0.5;
 type Mn = SMatrix<f64, N, N>;
@@ -127,6 +130,21 @@ pub struct RioConfig {
     /// is a floor; a scale below 1 fitted the simulator's walks and lost on the training set),
     /// see [`RioConfig::radar_noise_window`].
     pub radar_noise_scale_bounds: [f64; 2],
+    /// The radar's shared rounding error as a state (default on): the part of a radar
+    /// velocity's covariance that its points share through a coarse Doppler step
+    /// ([`VelocityMeasurement::shared_covariance`]) is an error that lasts from frame to frame
+    /// while the velocity stays within a fraction of a step, not noise drawn anew each frame. A
+    /// filter that takes it as new each frame is pinned by twenty identical readings a second: a
+    /// robot at 0.2 m/s under 0.46 m/s steps reads "0" until the filter believes it stopped. As a
+    /// state (radar frame, three components) with that covariance in the stationary state, its
+    /// correlation from one radar update to the next falls as `exp(-6 |dv| / step)` with the
+    /// change `dv` of the predicted radar velocity \[m/s\] (half a step: 0.05) and as
+    /// `exp(-dt / radar_error_time_s)` with time (the points come and go). Off: the whole
+    /// covariance is white.
+    pub radar_error_state: bool,
+    /// Correlation time of the shared rounding error at a steady velocity \[s\] (default 2), see
+    /// [`RioConfig::radar_error_state`].
+    pub radar_error_time_s: f64,
 }
 
 /// IMU noise presets for the filter's process noise, from the parts' datasheets (white noise
@@ -256,6 +274,8 @@ impl Default for RioConfig {
             gap_accel_std: 1.0,
             radar_noise_window: 300.0,
             radar_noise_scale_bounds: [1.0, 10.0],
+            radar_error_state: true,
+            radar_error_time_s: 2.0,
         }
     }
 }
@@ -287,6 +307,12 @@ pub struct VelocityMeasurement {
     pub velocity: [f64; 3],
     /// Its covariance \[m^2/s^2\].
     pub covariance: [[f64; 3]; 3],
+    /// The part of `covariance` the frame's points share through the rounding of a coarse
+    /// Doppler step \[m^2/s^2\] ([`crate::ego_velocity::Estimate::shared_covariance`]; zeros
+    /// for continuous Doppler), see [`RioConfig::radar_error_state`].
+    pub shared_covariance: [[f64; 3]; 3],
+    /// The Doppler quantisation step the velocity was estimated under \[m/s\] (0: continuous).
+    pub doppler_step: f64,
     /// Estimated with points carried from earlier frames
     /// ([`crate::runner::ClassicalConfig::stack_window_s`]): when the gate rejects it, it does
     /// not count towards a re-anchoring ([`RioConfig::reanchor_after`]), which takes a
@@ -460,6 +486,10 @@ pub struct Rio {
     /// Sum of the velocity corrections folded into the nominal state \[m/s, world\]: the
     /// nominal velocity minus it changes only with the IMU ([`Rio::imu_velocity`]).
     velocity_corrections: Vector3<f64>,
+    /// The radar's shared rounding error \[m/s, radar frame\] ([`RioConfig::radar_error_state`]).
+    radar_error: Vector3<f64>,
+    /// The time \[s\] and predicted radar velocity \[m/s\] of the last radar update.
+    last_radar: Option<(f64, Vector3<f64>)>,
 }
 
 impl Rio {
@@ -502,6 +532,8 @@ impl Rio {
             history: StepHistory::new(),
             vehicle: RadarMount::default(),
             velocity_corrections: Vector3::zeros(),
+            radar_error: Vector3::zeros(),
+            last_radar: None,
         }
     }
 
@@ -885,7 +917,10 @@ impl Rio {
 
     /// Predicted radar velocity and its Jacobian with respect to the error state.
     fn radar_model(&self) -> (Vector3<f64>, M3xN) {
-        self.frame_velocity(&self.mount)
+        let (pred, mut h) = self.frame_velocity(&self.mount);
+        h.fixed_view_mut::<3, 3>(0, RB)
+            .copy_from(&Matrix3::identity());
+        (pred + self.radar_error, h)
     }
 
     /// Ground vehicle constraint ([`RioConfig::nonholonomic_std`]): the vehicle frame's lateral
@@ -967,7 +1002,13 @@ impl Rio {
             pred += shift;
             h.set_column(TD, &rate);
         }
-        let given = Matrix3::from_fn(|i, j| m.covariance[i][j]);
+        let shared = Matrix3::from_fn(|i, j| m.shared_covariance[i][j]);
+        let given = if self.cfg.radar_error_state {
+            self.carry_radar_error(m, &shared);
+            Matrix3::from_fn(|i, j| m.covariance[i][j]) - shared
+        } else {
+            Matrix3::from_fn(|i, j| m.covariance[i][j])
+        };
         let rm = given * self.noise_scale + self.timing_covariance();
         let y = Vector3::from(m.velocity) - pred;
         let s = h * self.p * h.transpose() + rm;
@@ -1006,6 +1047,56 @@ impl Rio {
         self.correct(&y, &h, &rm, &si, !self.cfg.radar_heading);
         self.counters.updates += 1;
         self.nis_sum += d2;
+    }
+
+    /// Carries the shared rounding error to the radar measurement `m` (whose shared covariance
+    /// is `shared`): its correlation with the last update's is `exp(-6 |dv| / step) exp(-dt / T)`
+    /// ([`RioConfig::radar_error_state`]; `dv` the change of the radar velocity the IMU alone
+    /// integrated), and the stationary covariance is this frame's shared covariance (scaled as
+    /// the rest of the radar covariance is).
+    fn carry_radar_error(&mut self, m: &VelocityMeasurement, shared: &Matrix3<f64>) {
+        // The radar velocity the IMU alone carried the state to: the filter's own corrections
+        // (which the shared error's decay itself drives) must not count as motion.
+        let now = {
+            let st = self.nav.state();
+            let r_br = self.mount.rotation.to_rotation_matrix().into_inner();
+            let w = self.last_gyro - self.nav.gyro_bias;
+            r_br.transpose()
+                * (st.q.inverse() * self.imu_velocity() + w.cross(&self.mount.translation))
+        };
+        let step = m.doppler_step;
+        let rho = match self.last_radar {
+            Some((t, v)) if step > 0.0 && step.is_finite() => {
+                let tau = self.cfg.radar_error_time_s;
+                let dt = (m.t - t).abs();
+                let time = if tau > 0.0 && tau.is_finite() {
+                    (-dt / tau).exp()
+                } else {
+                    1.0
+                };
+                (-6.0 * (now - v).norm() / step).exp() * time
+            }
+            _ => 0.0,
+        };
+        self.last_radar = Some((m.t, now));
+        let rho = if rho.is_finite() {
+            rho.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        self.radar_error *= rho;
+        for k in RB..RB + 3 {
+            for j in 0..N {
+                self.p[(k, j)] *= rho;
+                self.p[(j, k)] *= rho;
+            }
+        }
+        let add = shared * (self.noise_scale * (1.0 - rho * rho));
+        for (i, r) in (RB..RB + 3).enumerate() {
+            for (j, c) in (RB..RB + 3).enumerate() {
+                self.p[(r, c)] += add[(i, j)];
+            }
+        }
     }
 
     /// One step of recursive maximum likelihood for the radar noise scale `alpha`
@@ -1165,6 +1256,7 @@ impl Rio {
         }
         // Beyond half a second the clock mapping is broken, not offset: held at the bound.
         self.time_offset = (self.time_offset + dx[TD]).clamp(-MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S);
+        self.radar_error += dx.fixed_rows::<3>(RB);
         self.nav.set_state(ns);
     }
 }

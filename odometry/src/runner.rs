@@ -833,6 +833,11 @@ impl Runner {
                     carried: false,
                     velocity: self.est.velocity.map(f64::from),
                     covariance: self.est.covariance.map(|r| r.map(|x| f64::from(x) * s)),
+                    shared_covariance: self
+                        .est
+                        .shared_covariance
+                        .map(|r| r.map(|x| f64::from(x) * s)),
+                    doppler_step: f64::from(self.cfg.ego.doppler_step.max(0.0)),
                 })
             }
             Status::Degenerate { .. } => {
@@ -1080,6 +1085,11 @@ impl Runner {
             t,
             velocity: self.est.velocity.map(f64::from),
             covariance,
+            shared_covariance: self
+                .est
+                .shared_covariance
+                .map(|r| r.map(|x| f64::from(x) * s)),
+            doppler_step: f64::from(self.cfg.ego.doppler_step.max(0.0)),
             carried: true,
         })
     }

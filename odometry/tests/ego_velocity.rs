@@ -369,3 +369,45 @@ fn a_coarse_doppler_step_at_low_speed_widens_the_covariance_to_the_rounding_it_c
         "dithered frame's forward variance {ratio}x the independent-rounding one"
     );
 }
+
+#[test]
+fn the_rounding_a_coarse_step_shares_is_reported_apart_and_not_counted_twice() {
+    // A radar at 0.15 m/s under 0.46 m/s steps: every static point reads 0, the frame says
+    // "at rest" and its error is the whole velocity. That error is the rounding the points share.
+    let step = 0.46f32;
+    let v = [0.05, 0.14, 0.0];
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let (mut dets, _) = frame(&mut rng, v, 20, 0.0, 20.0);
+    for d in dets.iter_mut() {
+        d.radial_velocity = (d.radial_velocity / step).round() * step;
+    }
+    assert!(dets.iter().all(|d| d.radial_velocity == 0.0));
+    let coarse = cfg().with_velocity_resolution(f64::from(step));
+    let e = EgoVelocityEstimator::new(coarse).estimate(&dets);
+    assert!(e.is_ok(), "{:?}", e.status);
+    let tr = |m: &[[f32; 3]; 3]| (0..3).map(|k| f64::from(m[k][k])).sum::<f64>();
+    let white: Vec<f64> = (0..3)
+        .map(|k| f64::from(e.covariance[k][k] - e.shared_covariance[k][k]))
+        .collect();
+    assert!(white.iter().all(|&w| w >= 0.0), "{white:?}");
+    // The total still covers the error.
+    assert!(nees(&e, v) < 16.27, "NEES {}", nees(&e, v));
+    // Apart from the shared part, a point's rounding counts only as far as the Doppler noise
+    // dithers it: the rest is what the Doppler noise gives, well below the rounding taken as
+    // independent per point (the estimate without the shared part).
+    let independent = EgoVelocityEstimator::new(Config {
+        quantisation_correlation: false,
+        ..coarse
+    })
+    .estimate(&dets);
+    let ratio = white.iter().sum::<f64>() / tr(&independent.covariance);
+    assert!(
+        ratio < 0.5,
+        "white part {ratio}x the independent-rounding covariance"
+    );
+    assert!(tr(&e.shared_covariance) > 10.0 * white.iter().sum::<f64>());
+    // Continuous Doppler shares nothing.
+    let fine = EgoVelocityEstimator::new(cfg()).estimate(&frame(&mut rng, v, 20, 0.0, 20.0).0);
+    assert!(fine.is_ok());
+    assert_eq!(fine.shared_covariance, [[0.0; 3]; 3]);
+}

@@ -121,6 +121,8 @@ fn walk(cfg: RioConfig, radar_sigma: f64, stated_sigma: f64) -> Walk {
                 carried: false,
                 velocity: vr.into(),
                 covariance: [[c, 0.0, 0.0], [0.0, c, 0.0], [0.0, 0.0, c]],
+                shared_covariance: [[0.0; 3]; 3],
+                doppler_step: 0.0,
             });
             if t > 5.0 {
                 let e = rio.state().v - v;
@@ -263,6 +265,8 @@ fn outlying_velocity_measurements_are_gated() {
                 carried: false,
                 velocity: v,
                 covariance: [[1e-3, 0.0, 0.0], [0.0, 1e-3, 0.0], [0.0, 0.0, 1e-3]],
+                shared_covariance: [[0.0; 3]; 3],
+                doppler_step: 0.0,
             });
         }
     }
@@ -402,5 +406,76 @@ fn rest_updates_leave_the_heading_to_the_gyro() {
     assert!(
         about_vertical.abs() > 5e-3,
         "heading moved only {about_vertical:.3e} rad"
+    );
+}
+
+/// A slow rig under coarse Doppler: it cruises at 0.2 m/s and every frame reads 0 (all its
+/// points round to 0 under 0.46 m/s steps), stated with the rounding the frame's points share.
+/// Returns the filter's speed after `secs` \[s\].
+fn cruise_reading_zero(cfg: RioConfig, secs: f64) -> f64 {
+    let cfg = RioConfig {
+        // The filter knows its velocity, attitude and IMU biases when the zeros begin (as after
+        // a rest and a radar that saw the start of the motion).
+        init_velocity_std: 0.02,
+        init_tilt_std: 0.002,
+        init_accel_bias_std: 0.005,
+        init_gyro_bias_std: 5e-4,
+        ..cfg
+    };
+    let start = NavState {
+        v: Vector3::new(0.2, 0.0, 0.0),
+        ..NavState::at_rest(0.0)
+    };
+    let mut rio = Rio::new(cfg, RadarMount::default(), start);
+    let (shared, white) = (0.03, 0.002);
+    let diag = |s: f64| [[s, 0.0, 0.0], [0.0, s, 0.0], [0.0, 0.0, s]];
+    for i in 0..=(secs * 100.0).round() as usize {
+        let t = i as f64 * 0.01;
+        rio.push_imu(ImuSample {
+            t,
+            accel: [0.0, 0.0, STANDARD_GRAVITY],
+            gyro: [0.0; 3],
+        });
+        if i % 5 == 0 && i > 0 {
+            rio.push_velocity(VelocityMeasurement {
+                t,
+                carried: false,
+                velocity: [0.0; 3],
+                covariance: diag(shared + white),
+                shared_covariance: diag(shared),
+                doppler_step: 0.46,
+            });
+        }
+    }
+    assert_eq!(
+        rio.counters().gated,
+        0,
+        "the zeros are within their covariance"
+    );
+    rio.state().v.norm()
+}
+
+#[test]
+fn a_rounding_the_frames_share_does_not_pin_a_slow_rig_to_zero() {
+    // Twenty identical readings a second are about one reading of the rounding per correlation
+    // time (2 s), not twenty: as a state the shared error takes the repeats, and the IMU keeps
+    // the speed over that time.
+    let tau = RioConfig::default().radar_error_time_s;
+    let kept = cruise_reading_zero(RioConfig::default(), tau);
+    assert!(
+        kept > 0.17,
+        "speed {kept} m/s after {tau} s of zeros (truth 0.2)"
+    );
+    // Taken as fresh noise each frame, the same readings pin the filter to zero.
+    let white = cruise_reading_zero(
+        RioConfig {
+            radar_error_state: false,
+            ..RioConfig::default()
+        },
+        tau,
+    );
+    assert!(
+        white < 0.1,
+        "speed {white} m/s with the rounding taken as white"
     );
 }
