@@ -94,6 +94,11 @@ pub struct OdometryArgs {
     /// ended with.
     #[arg(long, value_name = "N")]
     radar_noise_window: Option<f64>,
+    /// Correlation time of the rounding a coarse Doppler step leaves shared by a frame's points,
+    /// kept as a filter state \[s\] (default 2; 0: off, that rounding taken as fresh noise each
+    /// frame; docs/odometry.md "The rounding a frame's points share is a state").
+    #[arg(long, value_name = "SECONDS")]
+    radar_error_time: Option<f64>,
 }
 
 fn parse_time_offset(s: &str) -> std::result::Result<TimeOffsetMode, String> {
@@ -145,6 +150,9 @@ pub fn run(a: OdometryArgs) -> Result<()> {
     }
     if let Some(n) = a.radar_noise_window {
         cfg.rio.radar_noise_window = n.max(0.0);
+    }
+    if let Some(t) = a.radar_error_time {
+        cfg.rio = cfg.rio.with_radar_error_time(t);
     }
     if let Some(w) = a.stack_window {
         cfg.stack_window_s = w.max(0.0);

@@ -100,6 +100,10 @@ pub struct RunArgs {
     /// `filter.radar_noise_scale` gives the scale it ended with.
     #[arg(long, value_name = "N")]
     radar_noise_window: Option<f64>,
+    /// Correlation time of the rounding a coarse Doppler step leaves shared by a frame's points,
+    /// kept as a filter state \[s\] (as `odometry --radar-error-time`; default 2; 0: off).
+    #[arg(long, value_name = "SECONDS")]
+    radar_error_time: Option<f64>,
     /// Stop after this many seconds.
     #[arg(long)]
     duration: Option<f64>,
@@ -326,6 +330,9 @@ pub fn run(a: RunArgs) -> Result<()> {
     }
     if let Some(n) = a.radar_noise_window {
         cfg.classical.rio.radar_noise_window = n.max(0.0);
+    }
+    if let Some(t) = a.radar_error_time {
+        cfg.classical.rio = cfg.classical.rio.with_radar_error_time(t);
     }
     if let Some(p) = &file.extrinsics.radar {
         cfg.classical.mounting.radar = place(p);

@@ -120,6 +120,10 @@ pub struct ScoreArgs {
     /// (default: the shipped setting, 300; 0: off; docs/odometry.md "Radar noise adaptation").
     #[arg(long, value_name = "N")]
     radar_noise_window: Option<f64>,
+    /// Correlation time of the shared rounding state \[s\] (default: the shipped setting, 2; 0:
+    /// off; docs/odometry.md "The rounding a frame's points share is a state").
+    #[arg(long, value_name = "SECONDS")]
+    radar_error_time: Option<f64>,
     /// Let the radar updates correct the heading and the gyro bias about the vertical (default:
     /// off, the heading from the gyro; docs/odometry.md "Heading comes from the gyro").
     #[arg(long)]
@@ -321,6 +325,9 @@ pub fn run(a: ScoreArgs) -> Result<()> {
     classical.rio.radar_heading |= a.radar_heading;
     if let Some(n) = a.radar_noise_window {
         classical.rio.radar_noise_window = n.max(0.0);
+    }
+    if let Some(t) = a.radar_error_time {
+        classical.rio = classical.rio.with_radar_error_time(t);
     }
     // Per runtime column: learned measurements applied, evaluated, NIS sum; sessions handed over.
     let mut learned_use: Vec<(u64, u64, f64, usize)> = vec![(0, 0, 0.0, 0); estimators.len()];

@@ -216,6 +216,19 @@ impl core::str::FromStr for ImuNoise {
 }
 
 impl RioConfig {
+    /// This configuration with the shared rounding state's correlation time `seconds` \[s\]
+    /// ([`RioConfig::radar_error_time_s`]); 0, a negative or a non-finite value other than
+    /// infinity turns the state off ([`RioConfig::radar_error_state`]).
+    pub fn with_radar_error_time(mut self, seconds: f64) -> Self {
+        if seconds > 0.0 {
+            self.radar_error_state = true;
+            self.radar_error_time_s = seconds;
+        } else {
+            self.radar_error_state = false;
+        }
+        self
+    }
+
     /// These settings with the IMU noise of `imu` (white noise, bias random walks and turn-on
     /// bias uncertainty; nothing else changes).
     pub fn with_imu_noise(mut self, imu: ImuNoise) -> Self {
