@@ -970,9 +970,8 @@ impl Rio {
         let r_wb = st.q.to_rotation_matrix().into_inner();
         let r_br = at.rotation.to_rotation_matrix().into_inner();
         let t_br = at.translation;
-        let w = self.last_gyro - self.nav.gyro_bias;
         let v_b = r_wb.transpose() * st.v;
-        let pred = r_br.transpose() * (v_b + w.cross(&t_br));
+        let pred = self.velocity_in(at, &st.v);
         let mut h = M3xN::zeros();
         h.fixed_view_mut::<3, 3>(0, 3)
             .copy_from(&(r_br.transpose() * r_wb.transpose()));
@@ -981,6 +980,15 @@ impl Rio {
         h.fixed_view_mut::<3, 3>(0, 12)
             .copy_from(&(r_br.transpose() * t_br.cross_matrix()));
         (pred, h)
+    }
+
+    /// The velocity \[m/s\] of a frame fixed on the body (`at`), in that frame, when the body
+    /// moves at the world velocity `v` with the current attitude and rate of turn.
+    fn velocity_in(&self, at: &RadarMount, v: &Vector3<f64>) -> Vector3<f64> {
+        let r_wb = self.nav.state().q.to_rotation_matrix().into_inner();
+        let r_br = at.rotation.to_rotation_matrix().into_inner();
+        let w = self.last_gyro - self.nav.gyro_bias;
+        r_br.transpose() * (r_wb.transpose() * v + w.cross(&at.translation))
     }
 
     fn update(&mut self, m: &VelocityMeasurement) {
@@ -1070,13 +1078,7 @@ impl Rio {
     fn carry_radar_error(&mut self, m: &VelocityMeasurement, shared: &Matrix3<f64>) {
         // The radar velocity the IMU alone carried the state to: the filter's own corrections
         // (which the shared error's decay itself drives) must not count as motion.
-        let now = {
-            let st = self.nav.state();
-            let r_br = self.mount.rotation.to_rotation_matrix().into_inner();
-            let w = self.last_gyro - self.nav.gyro_bias;
-            r_br.transpose()
-                * (st.q.inverse() * self.imu_velocity() + w.cross(&self.mount.translation))
-        };
+        let now = self.velocity_in(&self.mount, &self.imu_velocity());
         let step = m.doppler_step;
         let rho = match self.last_radar {
             Some((t, v)) if step > 0.0 && step.is_finite() => {
@@ -1098,18 +1100,10 @@ impl Rio {
             0.0
         };
         self.radar_error *= rho;
-        for k in RB..RB + 3 {
-            for j in 0..N {
-                self.p[(k, j)] *= rho;
-                self.p[(j, k)] *= rho;
-            }
-        }
-        let add = shared * (self.noise_scale * (1.0 - rho * rho));
-        for (i, r) in (RB..RB + 3).enumerate() {
-            for (j, c) in (RB..RB + 3).enumerate() {
-                self.p[(r, c)] += add[(i, j)];
-            }
-        }
+        self.p.fixed_rows_mut::<3>(RB).scale_mut(rho);
+        self.p.fixed_columns_mut::<3>(RB).scale_mut(rho);
+        let mut block = self.p.fixed_view_mut::<3, 3>(RB, RB);
+        block += shared * (self.noise_scale * (1.0 - rho * rho));
     }
 
     /// One step of recursive maximum likelihood for the radar noise scale `alpha`

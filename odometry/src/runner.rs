@@ -811,6 +811,21 @@ impl Runner {
         }
     }
 
+    /// The latest ego-velocity estimate as the filter's measurement at `t` \[s\], its covariances
+    /// scaled by [`ClassicalConfig::velocity_cov_scale`] (`carried`: from stacked frames).
+    fn estimate_as_measurement(&self, t: f64, carried: bool) -> VelocityMeasurement {
+        let s = self.cfg.velocity_cov_scale;
+        let scaled = |c: [[f32; 3]; 3]| c.map(|r| r.map(|x| f64::from(x) * s));
+        VelocityMeasurement {
+            t,
+            carried,
+            velocity: self.est.velocity.map(f64::from),
+            covariance: scaled(self.est.covariance),
+            shared_covariance: scaled(self.est.shared_covariance),
+            doppler_step: f64::from(self.cfg.ego.doppler_step.max(0.0)),
+        }
+    }
+
     /// The ego-velocity of `dets` guided by `prior` (status counted); with the radar's pose
     /// `radar_in_world`, the points seen again weigh more ([`crate::persist`]).
     fn measure(
@@ -827,18 +842,7 @@ impl Runner {
         match self.est.status {
             Status::Ok => {
                 self.counters.ego_ok += 1;
-                let s = self.cfg.velocity_cov_scale;
-                Some(VelocityMeasurement {
-                    t,
-                    carried: false,
-                    velocity: self.est.velocity.map(f64::from),
-                    covariance: self.est.covariance.map(|r| r.map(|x| f64::from(x) * s)),
-                    shared_covariance: self
-                        .est
-                        .shared_covariance
-                        .map(|r| r.map(|x| f64::from(x) * s)),
-                    doppler_step: f64::from(self.cfg.ego.doppler_step.max(0.0)),
-                })
+                Some(self.estimate_as_measurement(t, false))
             }
             Status::Degenerate { .. } => {
                 self.counters.ego_degenerate += 1;
@@ -1076,22 +1080,11 @@ impl Runner {
             return None;
         }
         self.counters.ego_stacked += 1;
-        let s = self.cfg.velocity_cov_scale;
-        let mut covariance = self.est.covariance.map(|r| r.map(|x| f64::from(x) * s));
-        for (k, row) in covariance.iter_mut().enumerate() {
+        let mut m = self.estimate_as_measurement(t, true);
+        for (k, row) in m.covariance.iter_mut().enumerate() {
             row[k] += carried;
         }
-        Some(VelocityMeasurement {
-            t,
-            velocity: self.est.velocity.map(f64::from),
-            covariance,
-            shared_covariance: self
-                .est
-                .shared_covariance
-                .map(|r| r.map(|x| f64::from(x) * s)),
-            doppler_step: f64::from(self.cfg.ego.doppler_step.max(0.0)),
-            carried: true,
-        })
+        Some(m)
     }
 
     /// No IMU: hold the attitude, integrate the radar velocity to `t` \[s\].
