@@ -179,6 +179,8 @@ pub struct OfflineResult {
     pub gated: u64,
     /// IMU samples at which the body was at rest ([`crate::rest`]).
     pub rest_samples: u64,
+    /// Rests the filter's velocity refuted ([`crate::runner::RunnerCounters::rest_refuted`]).
+    pub rest_refuted: u64,
     /// Zero-velocity and zero-rate updates applied at rest.
     pub rest_updates: u64,
     /// Vertical velocity bounds applied ([`RioConfig::vertical_velocity_std`]).
@@ -396,6 +398,7 @@ pub fn run_with_motions(
         updates: filter.updates,
         gated: filter.gated,
         rest_samples: c.rest_samples,
+        rest_refuted: c.rest_refuted,
         rest_updates: filter.rest_updates,
         vertical_bounds: filter.vertical_bounds,
         horizontal_bounds: filter.horizontal_bounds,

@@ -160,8 +160,10 @@ pub struct RestDetector {
     since: Option<f64>,
     last_update: Option<f64>,
     /// The filter refuted the last rest ([`RestDetector::refute`]): no rest until the IMU has
-    /// moved.
+    /// moved or the filter's velocity is consistent with rest again ([`RestDetector::retry`]).
     refuted: bool,
+    /// Whether a refuted rest held at the last decided sample, and at the one before it.
+    refuted_at: [bool; 2],
     /// Nothing has contradicted the rest the session starts in yet: every decided sample's IMU
     /// was still and no frame said moving.
     initial: bool,
@@ -214,6 +216,7 @@ impl RestDetector {
             since: None,
             last_update: None,
             refuted: false,
+            refuted_at: [false; 2],
             initial: true,
         }
     }
@@ -296,6 +299,7 @@ impl RestDetector {
         self.initial &= still || !self.window_decides();
         self.still = [still, self.still[0]];
         self.refuted &= still;
+        self.refuted_at = [self.refuted, self.refuted_at[0]];
         let now = still && !self.refuted && self.radar_agrees(s.t);
         self.resting = [now, self.resting[0]];
         if !now {
@@ -354,11 +358,25 @@ impl RestDetector {
 
     /// The filter's velocity says the body is not at rest (a smooth cruise keeps the IMU as
     /// still as a rest, and a sparse or tilted radar can read zero): the rest ends now, and none
-    /// begins again until the IMU has moved.
+    /// begins again until the IMU has moved or [`RestDetector::retry`].
     pub fn refute(&mut self) {
         self.refuted = true;
+        self.refuted_at[0] = true;
         self.resting[0] = false;
         self.end_rest();
+    }
+
+    /// The filter's velocity is consistent with rest again after a refuted rest (the radar
+    /// frames, applied meanwhile, brought it there): rest may begin again from the next sample.
+    pub fn retry(&mut self) {
+        self.refuted = false;
+    }
+
+    /// Whether a rest the filter refuted holds (no rest until the IMU has moved, or
+    /// [`RestDetector::retry`]), at the last decided sample or, with `before`, at the one
+    /// before it.
+    pub fn refuted_before_frame(&self, before: bool) -> bool {
+        self.refuted_at[usize::from(before)]
     }
 
     /// Whether the rest the session starts in is still uncontradicted (see the module

@@ -755,6 +755,14 @@ impl Runner {
             return;
         };
         let c = *self.rest.config();
+        // A refuted rest is tried again once the radar frames applied since have brought the
+        // filter's velocity to where it is consistent with rest.
+        if self.rest.refuted_before_frame(false)
+            && self.rest.was_still(false)
+            && rio.at_rest_consistent(c.zero_velocity_std)
+        {
+            self.rest.retry();
+        }
         let due = due.filter(|_| {
             // A rest the filter's velocity contradicts is refuted, not applied (not the rest the
             // session starts in: the filter starts from it).
@@ -915,11 +923,16 @@ impl Runner {
         // Rest and stillness as decided at the sample before the last one at or before the frame
         // (the same in both input orders: the latest decided sample unless the frame is behind
         // the latest), with the frame's own verdict: a frame that says "moving" is applied, one
-        // that says "still" while the IMU is still starts the rest.
+        // that says "still" while the IMU is still starts the rest, unless the filter refuted
+        // that rest: then the frame is applied, since nothing else would correct the velocity
+        // (a coarse Doppler step reads 0 for a slow robot and for one that came to rest; before,
+        // such frames were dropped while the refuted rest applied nothing, and a robot that
+        // stopped with 0.1 m/s left in its filter drove on through a 5 s rest).
         let resting = self.rest.resting_before_frame(behind);
         let still = self.rest.was_still(behind);
-        let resting_now =
-            verdict != Verdict::Moving && (resting || (still && verdict == Verdict::Still));
+        let refuted = self.rest.refuted_before_frame(behind);
+        let resting_now = verdict != Verdict::Moving
+            && (resting || (still && !refuted && verdict == Verdict::Still));
         let m = if resting_now {
             self.counters.rest_frames += u64::from(m.is_some());
             // The frame agrees with the filter (zero velocity): the rejection run ends.
