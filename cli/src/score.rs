@@ -128,6 +128,26 @@ pub struct ScoreArgs {
     /// off, the heading from the gyro; docs/odometry.md "Heading comes from the gyro").
     #[arg(long)]
     radar_heading: bool,
+    /// The rigs declared ground vehicles, as their operator would (`odometry --vehicle`: the body
+    /// neither slides sideways nor lifts off): `cars-and-robots` (the split's cars and its
+    /// wheeled robots, which are planar and head along their path) or `cars` (the protocol
+    /// before 2026-12-06; docs/odometry.md "Ground vehicles").
+    #[arg(
+        long,
+        value_name = "cars|cars-and-robots",
+        default_value = "cars-and-robots"
+    )]
+    ground_vehicles: String,
+}
+
+/// Whether a session of `motion` runs with the ground vehicle constraint under the score's
+/// `--ground-vehicles` `rule`.
+fn declared_ground_vehicle(rule: &str, motion: MotionKind) -> Result<bool> {
+    match rule {
+        "cars" => Ok(motion == MotionKind::Vehicle),
+        "cars-and-robots" => Ok(matches!(motion, MotionKind::Vehicle | MotionKind::Robot)),
+        other => Err(format!("--ground-vehicles {other}: expected cars or cars-and-robots").into()),
+    }
 }
 
 /// One column of the table.
@@ -217,6 +237,8 @@ pub(crate) fn stale(dir: &std::path::Path, found: &str, e: &milliego_sim::split:
 pub fn run(a: ScoreArgs) -> Result<()> {
     let set: Set = a.set.parse()?;
     let version: SplitVersion = a.split.parse()?;
+    // Checked before anything is simulated or run.
+    declared_ground_vehicle(&a.ground_vehicles, MotionKind::Vehicle)?;
     let work = a
         .work
         .unwrap_or_else(|| std::env::temp_dir().join("milliego-benchmark"));
@@ -355,7 +377,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             return Err(stale(&dir, &s.meta.description, e).into());
         }
         let gt = Trajectory::from_tum(&s.groundtruth()?.ok_or("no ground truth")?);
-        let vehicle = e.scenario().motion == MotionKind::Vehicle;
+        let vehicle = declared_ground_vehicle(&a.ground_vehicles, e.scenario().motion)?;
         for (k, ((_, est), (_, out))) in estimators.iter_mut().zip(per.iter_mut()).enumerate() {
             let trajectory = match est {
                 Column::Classical(est) => {
@@ -423,7 +445,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             .collect();
         println!(
             "{}",
-            json!({"set": set.name(), "split": version.name(), "estimators": rows,
+            json!({"set": set.name(), "split": version.name(), "ground_vehicles": a.ground_vehicles, "estimators": rows,
                 "session_names": entries.iter().map(|e| e.dir_name()).collect::<Vec<_>>()})
         );
         return Ok(());
@@ -434,9 +456,10 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         v => format!(" of split {v}"),
     };
     println!(
-        "{} sessions of the '{}' set{of_split} (per-session ATE means, then over sessions)",
+        "{} sessions of the '{}' set{of_split} (per-session ATE means, then over sessions; declared ground vehicles: {})",
         entries.len(),
-        set.name()
+        set.name(),
+        a.ground_vehicles
     );
     // Wide enough for the longest name (models told apart by their file have long ones).
     let w = per.iter().map(|(n, _)| n.len()).max().unwrap_or(0).max(36);

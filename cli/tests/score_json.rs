@@ -82,3 +82,53 @@ fn score_json_reports_every_session_of_every_estimator() {
         }
     }
 }
+
+#[test]
+fn score_declares_the_robots_ground_vehicles_unless_told_cars_only() {
+    // The first two sessions of split v1's validation set: a corridor robot and a handheld walk.
+    let work = tempfile::tempdir().unwrap();
+    let score = |rule: Option<&str>| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_milliego"));
+        c.args([
+            "score",
+            "--set",
+            "val",
+            "--limit",
+            "2",
+            "--no-model",
+            "--json",
+        ])
+        .arg("--work")
+        .arg(work.path());
+        if let Some(r) = rule {
+            c.args(["--ground-vehicles", r]);
+        }
+        c.output().unwrap()
+    };
+    let parse = |o: &std::process::Output| -> serde_json::Value {
+        assert!(
+            o.status.success(),
+            "score: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        serde_json::from_slice(&o.stdout).expect("one JSON object")
+    };
+    let (default, cars) = (parse(&score(None)), parse(&score(Some("cars"))));
+    assert_eq!(default["ground_vehicles"], "cars-and-robots");
+    assert_eq!(cars["ground_vehicles"], "cars");
+    let names = default["session_names"].as_array().unwrap();
+    assert!(names[0].as_str().unwrap().contains("robot"), "{names:?}");
+    assert!(names[1].as_str().unwrap().contains("handheld"), "{names:?}");
+    let ate = |v: &serde_json::Value, k: usize| {
+        v["estimators"]["Doppler RIO"]["per_session"][k]["ate_3d_mean_m"]
+            .as_f64()
+            .unwrap()
+    };
+    // The robot runs with the constraint by default only; the walk is never constrained.
+    assert_ne!(ate(&default, 0), ate(&cars, 0));
+    assert_eq!(ate(&default, 1), ate(&cars, 1));
+    let bad = score(Some("boats"));
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("--ground-vehicles boats"), "{err}");
+}
