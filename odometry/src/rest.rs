@@ -113,6 +113,12 @@ pub struct RestConfig {
     /// the rest of the session (the radar cannot see heading). Zero-velocity and
     /// position-hold updates are not held back: the radar corrects what they get wrong.
     pub rate_margin_s: f64,
+    /// [`RestConfig::rate_margin_s`] for a rest no radar frame has called still yet \[s\]:
+    /// the one the session starts in, carried through frames without a verdict. A rig that
+    /// starts cruising in a gentle turn with a radar too sparse to say so (5 points a frame, none
+    /// at zero Doppler) looks just like it for its first half second or so, and its rate of
+    /// turn taken as gyroscope bias turned the heading 1.7 deg/s for the rest of a 60 s run.
+    pub unconfirmed_rate_margin_s: f64,
 }
 
 impl Default for RestConfig {
@@ -134,6 +140,7 @@ impl Default for RestConfig {
             hold_position_std: 0.001,
             zero_rate_std_min: 0.002,
             rate_margin_s: 0.5,
+            unconfirmed_rate_margin_s: 1.0,
         }
     }
 }
@@ -162,6 +169,8 @@ pub struct RestDetector {
     /// The filter refuted the last rest ([`RestDetector::refute`]): no rest until the IMU has
     /// moved or the filter's velocity is consistent with rest again ([`RestDetector::retry`]).
     refuted: bool,
+    /// A radar frame has said "still" during the current rest.
+    confirmed: bool,
     /// Whether a refuted rest held at the last decided sample, and at the one before it.
     refuted_at: [bool; 2],
     /// Nothing has contradicted the rest the session starts in yet: every decided sample's IMU
@@ -216,6 +225,7 @@ impl RestDetector {
             since: None,
             last_update: None,
             refuted: false,
+            confirmed: false,
             refuted_at: [false; 2],
             initial: true,
         }
@@ -308,6 +318,17 @@ impl RestDetector {
         }
         self.gyro_sum += Vector3::from(s.gyro);
         self.gyro_n += 1;
+        self.confirmed |= self.radar_says_still(s.t);
+        // A rest no frame has called still (the one the session starts in, through frames
+        // without a verdict) may be a steady cruise the radar is too sparse to see: its rates
+        // wait longer.
+        let margin = if self.confirmed {
+            self.cfg.rate_margin_s
+        } else {
+            self.cfg
+                .unconfirmed_rate_margin_s
+                .max(self.cfg.rate_margin_s)
+        };
         let since = *self.since.get_or_insert(s.t);
         let from = self.last_update.map_or(since, |l| l.max(since));
         if s.t - from < self.cfg.update_period_s {
@@ -326,7 +347,7 @@ impl RestDetector {
         // The rates the rest has outlasted by the margin are taken.
         let u = RestUpdate {
             t: s.t,
-            rate: self.take_held(s.t - self.cfg.rate_margin_s),
+            rate: self.take_held(s.t - margin),
             first: self.last_update.is_none_or(|l| l < since),
         };
         self.last_update = Some(s.t);
@@ -350,6 +371,7 @@ impl RestDetector {
     /// The rest is over: its rates not yet taken go with it.
     fn end_rest(&mut self) {
         self.since = None;
+        self.confirmed = false;
         self.gyro_sum = Vector3::zeros();
         self.gyro_n = 0;
         self.held.clear();
@@ -403,6 +425,15 @@ impl RestDetector {
     /// Whether the IMU was still at the last decided sample (`before`: at the one before it).
     pub fn was_still(&self, before: bool) -> bool {
         self.still[usize::from(before)]
+    }
+
+    /// Whether the newest verdict up to `t` \[s\] is still, and recent.
+    fn radar_says_still(&self, t: f64) -> bool {
+        self.verdicts
+            .iter()
+            .rev()
+            .find(|(tr, _)| *tr <= t)
+            .is_some_and(|(tr, v)| *v == Verdict::Still && t - tr <= self.cfg.radar_max_age_s)
     }
 
     /// The radar's side of rest at `t` \[s\]: the newest verdict up to `t` is still (and recent),
