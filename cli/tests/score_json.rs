@@ -2,12 +2,12 @@
 //! in the order of `session_names`, and the summary (mean, max, median, sessions worse than
 //! Doppler RIO's) is made of them.
 
-use std::process::Command;
+use std::process::{Command, Output};
 
-#[test]
-fn score_json_reports_every_session_of_every_estimator() {
-    let work = tempfile::tempdir().unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_milliego"))
+/// `milliego score --json --no-model` over the first two sessions of split v1's validation set
+/// (simulated into `work`), with `extra` arguments.
+fn score_two(work: &std::path::Path, extra: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_milliego"))
         .args([
             "score",
             "--set",
@@ -18,9 +18,16 @@ fn score_json_reports_every_session_of_every_estimator() {
             "--json",
         ])
         .arg("--work")
-        .arg(work.path())
+        .arg(work)
+        .args(extra)
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+#[test]
+fn score_json_reports_every_session_of_every_estimator() {
+    let work = tempfile::tempdir().unwrap();
+    let o = score_two(work.path(), &[]);
     assert!(
         o.status.success(),
         "score: {}",
@@ -87,25 +94,11 @@ fn score_json_reports_every_session_of_every_estimator() {
 fn score_declares_the_robots_ground_vehicles_unless_told_cars_only() {
     // The first two sessions of split v1's validation set: a corridor robot and a handheld walk.
     let work = tempfile::tempdir().unwrap();
-    let score = |rule: Option<&str>| {
-        let mut c = Command::new(env!("CARGO_BIN_EXE_milliego"));
-        c.args([
-            "score",
-            "--set",
-            "val",
-            "--limit",
-            "2",
-            "--no-model",
-            "--json",
-        ])
-        .arg("--work")
-        .arg(work.path());
-        if let Some(r) = rule {
-            c.args(["--ground-vehicles", r]);
-        }
-        c.output().unwrap()
+    let score = |rule: Option<&str>| match rule {
+        Some(r) => score_two(work.path(), &["--ground-vehicles", r]),
+        None => score_two(work.path(), &[]),
     };
-    let parse = |o: &std::process::Output| -> serde_json::Value {
+    let parse = |o: &Output| -> serde_json::Value {
         assert!(
             o.status.success(),
             "score: {}",

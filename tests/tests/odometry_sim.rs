@@ -260,6 +260,30 @@ fn heading_errors(s: &Session, est: &[milliego_session::TumPose]) -> Vec<f64> {
         .collect()
 }
 
+/// Largest absolute heading error of `poses` \[deg\] ([`heading_errors`]).
+fn worst(s: &Session, poses: &[milliego_session::TumPose]) -> f64 {
+    heading_errors(s, poses)
+        .iter()
+        .fold(0.0f64, |m, x| m.max(x.abs()))
+        .to_degrees()
+}
+
+/// Doppler RIO with the defaults over `s`, with its worst heading error and the gyro alone's
+/// (IMU dead reckoning) \[deg\].
+fn headings_against_the_gyro(s: &Session) -> (milliego_odometry::offline::OfflineResult, f64, f64) {
+    let rio = run(s, &OfflineConfig::default()).expect("offline run");
+    let gyro = run(
+        s,
+        &OfflineConfig {
+            estimator: Estimator::ImuOnly,
+            ..OfflineConfig::default()
+        },
+    )
+    .expect("offline run");
+    let (h_rio, h_gyro) = (worst(s, &rio.trajectory), worst(s, &gyro.trajectory));
+    (rio, h_rio, h_gyro)
+}
+
 #[test]
 fn a_far_yawed_tilted_radar_never_makes_the_heading_worse_than_the_gyro() {
     // The rig that broke heading on real data: radar 1.1 m ahead of the IMU, yawed 30 deg,
@@ -271,35 +295,16 @@ fn a_far_yawed_tilted_radar_never_makes_the_heading_worse_than_the_gyro() {
         sc.radar_yaw_deg = 30.0;
         sc.radar_tilt_deg = 25.0;
         let (_dir, s) = simulated(&sc);
-        let worst = |e: Vec<f64>| e.iter().fold(0.0f64, |m, x| m.max(x.abs())).to_degrees();
-        let rio = run(&s, &OfflineConfig::default()).expect("offline run");
-        let gyro = run(
-            &s,
-            &OfflineConfig {
-                estimator: Estimator::ImuOnly,
-                ..OfflineConfig::default()
-            },
-        )
-        .expect("offline run");
-        let (h_rio, h_gyro) = (
-            worst(heading_errors(&s, &rio.trajectory)),
-            worst(heading_errors(&s, &gyro.trajectory)),
-        );
+        let (rio, h_rio, h_gyro) = headings_against_the_gyro(&s);
         let mut old = OfflineConfig::default();
         old.rio.radar_heading = true;
-        let h_old = worst(heading_errors(
-            &s,
-            &run(&s, &old).expect("offline run").trajectory,
-        ));
+        let h_old = worst(&s, &run(&s, &old).expect("offline run").trajectory);
         // The points-seen-again option changes which points vote, not what may correct the
         // heading: it must keep the bound too (it did not while the vertical velocity bound's
         // gain could turn the heading: 3.3 deg on the handheld).
         let mut seen_again = OfflineConfig::default();
         seen_again.persist.window_s = milliego_odometry::persist::RECOMMENDED_WINDOW_S;
-        let h_seen = worst(heading_errors(
-            &s,
-            &run(&s, &seen_again).expect("offline run").trajectory,
-        ));
+        let h_seen = worst(&s, &run(&s, &seen_again).expect("offline run").trajectory);
         let path = ate(&s, Estimator::Doppler).1;
         println!(
             "{motion:?} mounted 1.1 m ahead, yawed 30, tilted 25: worst heading error Doppler RIO {h_rio:.2} deg (points seen again weighed: {h_seen:.2} deg; radar correcting heading: {h_old:.2} deg), gyro alone {h_gyro:.2} deg, ATE {:.3} m over {path:.1} m",
@@ -328,20 +333,7 @@ fn a_robot_starting_in_a_gentle_turn_unseen_by_the_radar_keeps_the_gyros_heading
     let mut sc = Scenario::new(Family::Corridor, MotionKind::Robot, 3);
     sc.duration_s = 60.0;
     let (_dir, s) = simulated(&sc);
-    let worst = |e: Vec<f64>| e.iter().fold(0.0f64, |m, x| m.max(x.abs())).to_degrees();
-    let rio = run(&s, &OfflineConfig::default()).expect("offline run");
-    let gyro = run(
-        &s,
-        &OfflineConfig {
-            estimator: Estimator::ImuOnly,
-            ..OfflineConfig::default()
-        },
-    )
-    .expect("offline run");
-    let (h_rio, h_gyro) = (
-        worst(heading_errors(&s, &rio.trajectory)),
-        worst(heading_errors(&s, &gyro.trajectory)),
-    );
+    let (rio, h_rio, h_gyro) = headings_against_the_gyro(&s);
     println!(
         "robot starting in a turn: worst heading error {h_rio:.2} deg, gyro alone {h_gyro:.2} deg, {} rest samples",
         rio.rest_samples
