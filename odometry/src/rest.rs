@@ -429,23 +429,26 @@ impl RestDetector {
 
     /// Whether the newest verdict up to `t` \[s\] is still, and recent.
     fn radar_says_still(&self, t: f64) -> bool {
-        self.verdicts
-            .iter()
-            .rev()
-            .find(|(tr, _)| *tr <= t)
-            .is_some_and(|(tr, v)| *v == Verdict::Still && t - tr <= self.cfg.radar_max_age_s)
+        self.recent_verdict(t) == Some(Verdict::Still)
+    }
+
+    /// The newest verdict up to `t` \[s\]; a "still" older than [`RestConfig::radar_max_age_s`]
+    /// then reads as a frame without a verdict.
+    fn recent_verdict(&self, t: f64) -> Option<Verdict> {
+        let (tr, v) = self.verdicts.iter().rev().find(|(tr, _)| *tr <= t)?;
+        let stale = *v == Verdict::Still && t - tr > self.cfg.radar_max_age_s;
+        Some(if stale { Verdict::None } else { *v })
     }
 
     /// The radar's side of rest at `t` \[s\]: the newest verdict up to `t` is still (and recent),
     /// or the body was at rest and no frame since says moving.
     fn radar_agrees(&self, t: f64) -> bool {
-        let latest = self.verdicts.iter().rev().find(|(tr, _)| *tr <= t);
-        match latest {
-            Some((_, Verdict::Moving)) | None => false,
-            Some((tr, Verdict::Still)) if t - tr <= self.cfg.radar_max_age_s => true,
-            // A frame without a verdict: the rest goes on, and so does the one the session
-            // starts in, uncontradicted so far.
-            Some(_) => self.resting[0] || self.initial,
+        match self.recent_verdict(t) {
+            Some(Verdict::Moving) | None => false,
+            Some(Verdict::Still) => true,
+            // A frame without a verdict (or a stale "still"): the rest goes on, and so does the
+            // one the session starts in, uncontradicted so far.
+            Some(Verdict::None) => self.resting[0] || self.initial,
         }
     }
 
