@@ -294,17 +294,25 @@ impl Monitor {
         // A non-finite NIS counts as far beyond the gate.
         self.recent
             .push_back(if nis.is_finite() { nis } else { f64::MAX });
-        self.failed = self.recent.len() == w && !self.consistent();
+        self.failed = !self.consistent(w);
         self.failed
     }
 
-    fn consistent(&self) -> bool {
+    /// Whether the window of `w` measurements is consistent, or, while it is still filling,
+    /// can still be: its capped NIS sum and its count beyond the gate only grow until it is
+    /// full, so a first window already over either bound fails whatever comes next, and is
+    /// judged at once instead of after `w` measurements, most of which would be applied.
+    fn consistent(&self, w: usize) -> bool {
         let n = self.recent.len() as f64;
         // Each term capped at twice the gate: one wild value must not decide alone.
         let cap = 2.0 * self.cfg.gate;
-        let mean = self.recent.iter().map(|d| d.min(cap)).sum::<f64>() / n;
+        let sum = self.recent.iter().map(|d| d.min(cap)).sum::<f64>();
         let beyond = self.recent.iter().filter(|d| **d > self.cfg.gate).count() as f64;
-        mean <= self.cfg.nis_max && beyond <= self.cfg.gated_max * n
+        let full = w as f64;
+        if self.recent.len() < w {
+            return sum <= self.cfg.nis_max * full && beyond <= self.cfg.gated_max * full;
+        }
+        sum / n <= self.cfg.nis_max && beyond <= self.cfg.gated_max * n
     }
 }
 
@@ -322,12 +330,12 @@ mod tests {
     #[test]
     fn a_full_inconsistent_window_switches_off_for_good() {
         let mut m = Monitor::new(cfg());
-        // Inconsistent from the start, but the window is not full yet.
+        // A mean of 7 is inconsistent, but until the window is full it can still come down.
         for _ in 0..4 {
-            assert!(!m.record(100.0));
+            assert!(!m.record(7.0));
             assert!(m.trusted());
         }
-        assert!(m.record(100.0));
+        assert!(m.record(7.0));
         assert!(!m.trusted());
         for _ in 0..10 {
             assert!(!m.record(1.0));
@@ -360,15 +368,41 @@ mod tests {
     fn a_high_mean_without_gated_values_is_inconsistent() {
         let mut m = Monitor::new(cfg());
         for _ in 0..4 {
-            m.record(9.0);
+            assert!(!m.record(7.0));
         }
-        assert!(m.record(9.0));
+        assert!(m.record(7.0));
         assert!(!m.trusted());
         let mut m = Monitor::new(cfg());
         for _ in 0..4 {
             m.record(1.0);
         }
         assert!(m.record(f64::NAN), "a non-finite NIS is beyond the gate");
+    }
+
+    #[test]
+    fn a_first_window_bound_to_fail_switches_off_before_it_is_full() {
+        // The shipped window of 40: at most 8 beyond the gate and a capped NIS sum of 240.
+        let d = LearnedConfig::default();
+        assert_eq!((d.window, d.nis_max, d.gated_max), (40, 6.0, 0.2));
+        // Just beyond the gate: the ninth such measurement leaves no way to a consistent window.
+        let mut m = Monitor::new(d);
+        for k in 1..=8 {
+            assert!(!m.record(17.0), "measurement {k}");
+        }
+        assert!(m.record(17.0), "the ninth beyond the gate");
+        // Just within the gate: the sum passes 240 at the seventeenth (17 x 15 = 255).
+        let mut m = Monitor::new(d);
+        for k in 1..=16 {
+            assert!(!m.record(15.0), "measurement {k}");
+        }
+        assert!(m.record(15.0), "the seventeenth");
+        // Eight beyond the gate, then consistent ones: the full window passes, and so must
+        // the partial ones on the way.
+        let mut m = Monitor::new(d);
+        for nis in [17.0; 8].into_iter().chain([1.0; 60]) {
+            assert!(!m.record(nis));
+        }
+        assert!(m.trusted());
     }
 
     #[test]
