@@ -299,20 +299,17 @@ impl Monitor {
     }
 
     /// Whether the window of `w` measurements is consistent, or, while it is still filling,
-    /// can still be: its capped NIS sum and its count beyond the gate only grow until it is
-    /// full, so a first window already over either bound fails whatever comes next, and is
-    /// judged at once instead of after `w` measurements, most of which would be applied.
+    /// can still be: both bounds are on a full window's capped NIS sum and count beyond the
+    /// gate, which only grow until it is full, so a first window already over either fails
+    /// whatever comes next, and is judged at once instead of after `w` measurements, most of
+    /// which would be applied.
     fn consistent(&self, w: usize) -> bool {
-        let n = self.recent.len() as f64;
+        let full = w as f64;
         // Each term capped at twice the gate: one wild value must not decide alone.
         let cap = 2.0 * self.cfg.gate;
         let sum = self.recent.iter().map(|d| d.min(cap)).sum::<f64>();
         let beyond = self.recent.iter().filter(|d| **d > self.cfg.gate).count() as f64;
-        let full = w as f64;
-        if self.recent.len() < w {
-            return sum <= self.cfg.nis_max * full && beyond <= self.cfg.gated_max * full;
-        }
-        sum / n <= self.cfg.nis_max && beyond <= self.cfg.gated_max * n
+        sum <= self.cfg.nis_max * full && beyond <= self.cfg.gated_max * full
     }
 }
 
