@@ -84,8 +84,8 @@ pub struct OdometryArgs {
     stack_window: Option<f64>,
     /// How far back a radar point counts as seen again \[s\]: points a static reflector gave in
     /// the frames before weigh more in the ego-velocity consensus than points seen once (clutter,
-    /// multipath). Default 0: off; 0.125 is the setting chosen on the validation sets
-    /// (docs/odometry.md, "Points seen again"); keep it off a multiple of the frame period
+    /// multipath). Default 0.125, chosen on the validation sets (docs/odometry.md,
+    /// "Points seen again"); 0: off; keep it off a multiple of the frame period
     #[arg(long, value_name = "SECONDS")]
     persist_window: Option<f64>,
     /// Radar updates over which the filter adapts the scale of the radar velocity covariance

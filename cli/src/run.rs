@@ -89,8 +89,8 @@ pub struct RunArgs {
     #[arg(long)]
     radar_heading: bool,
     /// How far back a radar point counts as seen again \[s\]: points seen in the frames before
-    /// weigh more in the ego-velocity consensus (as `odometry --persist-window`; default 0: off;
-    /// 0.125 is the setting chosen on the validation sets, docs/odometry.md "Points seen again").
+    /// weigh more in the ego-velocity consensus (as `odometry --persist-window`; default 0.125,
+    /// chosen on the validation sets, docs/odometry.md "Points seen again"; 0: off).
     /// The summary's `filter` block counts the points seen again.
     #[arg(long, value_name = "SECONDS")]
     persist_window: Option<f64>,

@@ -107,8 +107,13 @@ pub struct ScoreArgs {
     /// an interval: on or off (default: the shipped setting, docs/model.md "Fusion").
     #[arg(long, value_name = "on|off")]
     learned_offset: Option<String>,
+    /// Widen the learned measurements' deviation by the network's error measured online where
+    /// the radar covers an interval (its excess variance and its correlation between
+    /// consecutive intervals): on or off (default: the shipped setting, docs/model.md "Fusion").
+    #[arg(long, value_name = "on|off")]
+    learned_noise: Option<String>,
     /// How far back a radar point counts as seen again in the ego-velocity consensus \[s\]
-    /// (default: the shipped setting, off; 0.125 is the setting chosen on the validation sets,
+    /// (default: the shipped setting, 0.125, chosen on the validation sets; 0: off;
     /// docs/odometry.md "Points seen again")
     #[arg(long, value_name = "S")]
     persist_window: Option<f64>,
@@ -326,6 +331,13 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             "on" => true,
             "off" => false,
             o => return Err(format!("--learned-offset: {o:?} is neither on nor off").into()),
+        };
+    }
+    if let Some(v) = &a.learned_noise {
+        learned.adapt_noise = match v.as_str() {
+            "on" => true,
+            "off" => false,
+            o => return Err(format!("--learned-noise: {o:?} is neither on nor off").into()),
         };
     }
     if let Some(n) = a.learned_doppler_covers {

@@ -125,3 +125,17 @@ fn score_declares_the_robots_ground_vehicles_unless_told_cars_only() {
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(err.contains("--ground-vehicles boats"), "{err}");
 }
+
+#[test]
+fn score_refuses_a_learned_switch_that_is_neither_on_nor_off_by_name() {
+    let work = tempfile::tempdir().unwrap();
+    for flag in ["--learned-noise", "--learned-offset", "--learned-scale"] {
+        let o = score_two(work.path(), &[flag, "maybe"]);
+        assert!(!o.status.success(), "{flag} maybe was taken");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains(flag) && err.contains("\"maybe\""),
+            "{flag}: {err}"
+        );
+    }
+}

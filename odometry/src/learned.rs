@@ -21,6 +21,13 @@
 //! predicted deviation `sigma_i` of that window's translation along body axis i. Heading stays out
 //! of the gain as for radar updates ([`crate::rio::RioConfig::radar_heading`]).
 //!
+//! The network's errors are not independent from one interval to the next, as the update assumes.
+//! Where the radar covered an interval, the network's residual against the filter, over its
+//! stated deviation, measures that error; the update's covariance is widened by what those
+//! residuals say ([`LearnedConfig::adapt_noise`], [`ScaleCalibration::noise_factor`]: their
+//! variance beyond the stated one, times `(1 + rho) / (1 - rho)` for their lag-1 correlation
+//! `rho`). The gate and the online check judge the stated deviation.
+//!
 //! # Online consistency ([`Monitor`])
 //!
 //! Every measurement's normalised innovation square (NIS, 3 dof) is computed whether or not it is
@@ -70,6 +77,12 @@ pub struct LearnedConfig {
     /// online check ([`Monitor`]) judges each measurement before the offset is taken off (it
     /// would absorb a wrong axis convention too). Off by default (docs/model.md, "Fusion").
     pub calibrate_offset: bool,
+    /// Widen the stated deviation by what the intervals the radar covered say of the network's
+    /// error ([`ScaleCalibration::noise_factor`]): its variance beyond the stated one and its
+    /// correlation between consecutive intervals. A filter taking correlated measurements as
+    /// independent trusts their mean too much: for errors with lag-1 correlation `rho` the mean
+    /// of many has `(1 + rho) / (1 - rho)` times the variance that independence implies.
+    pub adapt_noise: bool,
 }
 
 /// Radar updates over an interval for it to calibrate the scale ([`LearnedConfig::calibrate_scale`]).
@@ -86,8 +99,19 @@ pub const OFFSET_FORGET: f64 = 0.95;
 /// Intervals (forgotten weight) the offset calibration must have seen before it applies.
 pub const OFFSET_MIN_WEIGHT: f64 = 5.0;
 
-/// The online calibration of the network's scale ([`LearnedConfig::calibrate_scale`]) and
-/// velocity offset ([`LearnedConfig::calibrate_offset`]) against the filter.
+/// Forgetting factor of the noise estimate per interval ([`LearnedConfig::adapt_noise`]; 0.98:
+/// ~50 intervals, 12 s at 4 Hz).
+pub const NOISE_FORGET: f64 = 0.98;
+/// Intervals (forgotten weight) the noise estimate must have seen before it applies.
+pub const NOISE_MIN_WEIGHT: f64 = 10.0;
+/// Largest lag-1 correlation the noise estimate takes (a factor of 9 from the correlation).
+pub const NOISE_RHO_MAX: f64 = 0.8;
+/// The factor on the learned measurements' covariance is kept within [1, this].
+pub const NOISE_FACTOR_MAX: f64 = 25.0;
+
+/// The online calibration of the network's scale ([`LearnedConfig::calibrate_scale`]), velocity
+/// offset ([`LearnedConfig::calibrate_offset`]) and noise ([`LearnedConfig::adapt_noise`])
+/// against the filter.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct ScaleCalibration {
     num: f64,
@@ -95,6 +119,14 @@ pub struct ScaleCalibration {
     // The offset's forgotten sum of residual velocities (body frame at `from`) and its weight.
     offset_sum: nalgebra::Vector3<f64>,
     offset_weight: f64,
+    // The noise estimate: the forgotten sums of the normalised residual's square and of the
+    // product of consecutive ones (each a mean over the axes), their weights, and the last
+    // residual with the time it ended.
+    noise_sq: f64,
+    noise_weight: f64,
+    noise_lag: f64,
+    noise_lag_weight: f64,
+    last_residual: Option<(f64, nalgebra::Vector3<f64>)>,
 }
 
 impl ScaleCalibration {
@@ -130,13 +162,57 @@ impl ScaleCalibration {
             self.offset_weight = OFFSET_FORGET * self.offset_weight + 1.0;
         }
     }
+
+    /// One interval the radar covered, from `t_from` to `t_to` \[s\]: the network's translation
+    /// (scaled) less the filter's, per body axis, over the measurement's stated deviation
+    /// ([`LearnedConfig::deviation`]; unitless). Consecutive intervals (the one ending where
+    /// this one starts, within 1 ms) give the correlation.
+    pub fn push_noise(&mut self, t_from: f64, t_to: f64, z: &nalgebra::Vector3<f64>) {
+        if !(z.iter().all(|x| x.is_finite()) && t_from.is_finite() && t_to.is_finite()) {
+            return;
+        }
+        self.noise_sq = NOISE_FORGET * self.noise_sq + z.norm_squared() / 3.0;
+        self.noise_weight = NOISE_FORGET * self.noise_weight + 1.0;
+        if let Some((t, prev)) = self.last_residual {
+            if (t - t_from).abs() <= 1e-3 {
+                self.noise_lag = NOISE_FORGET * self.noise_lag + z.dot(&prev) / 3.0;
+                self.noise_lag_weight = NOISE_FORGET * self.noise_lag_weight + 1.0;
+            }
+        }
+        self.last_residual = Some((t_to, *z));
+    }
+
+    /// The factor on the learned measurements' stated covariance ([`LearnedConfig::adapt_noise`]):
+    /// the normalised residual's mean square `v` (1 when the stated deviation is right; it holds
+    /// the filter's own error too, so it errs on the side of trusting the network less) times
+    /// `(1 + rho) / (1 - rho)` for their lag-1 correlation `rho` (clamped to [0,
+    /// [`NOISE_RHO_MAX`]]), within [1, [`NOISE_FACTOR_MAX`]]. 1 until [`NOISE_MIN_WEIGHT`]
+    /// intervals were seen; `v` below 1 counts as 1 (the network is never trusted more than
+    /// stated). Both moments are taken about zero: a lasting bias reads as correlation.
+    pub fn noise_factor(&self) -> f64 {
+        if self.noise_weight < NOISE_MIN_WEIGHT {
+            return 1.0;
+        }
+        let v = self.noise_sq / self.noise_weight;
+        let rho = if self.noise_lag_weight >= NOISE_MIN_WEIGHT && v > 0.0 {
+            (self.noise_lag / self.noise_lag_weight / v).clamp(0.0, NOISE_RHO_MAX)
+        } else {
+            0.0
+        };
+        let f = v.max(1.0) * (1.0 + rho) / (1.0 - rho);
+        if f.is_finite() {
+            f.clamp(1.0, NOISE_FACTOR_MAX)
+        } else {
+            NOISE_FACTOR_MAX
+        }
+    }
 }
 
 impl Default for LearnedConfig {
     fn default() -> Self {
         LearnedConfig {
             // Chosen on the validation set of the benchmark split (docs/model.md, "Fusion").
-            base_std_m: 0.09,
+            base_std_m: 0.15,
             scale_std: 0.3,
             predicted_std: 0.0,
             gate: 16.27,
@@ -147,6 +223,7 @@ impl Default for LearnedConfig {
             doppler_covers: 0,
             calibrate_scale: true,
             calibrate_offset: false,
+            adapt_noise: true,
         }
     }
 }
@@ -499,5 +576,96 @@ mod calibration_tests {
         assert!((c.offset() - r2).norm() < 1e-3, "{:?}", c.offset());
         // The offset leaves the scale alone.
         assert_eq!(c.scale(), 1.0);
+    }
+
+    /// Residuals of an AR(1) process with lag-1 correlation `rho` and unit variance, pushed as
+    /// consecutive intervals of 0.25 s (a small deterministic generator: the test needs no
+    /// randomness crate).
+    fn ar1(c: &mut ScaleCalibration, rho: f64, sigma: f64, n: usize, t0: f64) -> f64 {
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut normal = move || {
+            // Sum of 12 uniforms less 6: mean 0, variance 1.
+            (0..12)
+                .map(|_| {
+                    state ^= state << 13;
+                    state ^= state >> 7;
+                    state ^= state << 17;
+                    (state >> 11) as f64 / (1u64 << 53) as f64
+                })
+                .sum::<f64>()
+                - 6.0
+        };
+        let mut e = Vector3::new(normal(), normal(), normal()) * sigma;
+        let k = (1.0 - rho * rho).sqrt();
+        let mut t = t0;
+        for _ in 0..n {
+            e = e * rho + Vector3::new(normal(), normal(), normal()) * (sigma * k);
+            c.push_noise(t, t + 0.25, &e);
+            t += 0.25;
+        }
+        t
+    }
+
+    #[test]
+    fn the_noise_factor_follows_the_residuals_variance_and_correlation() {
+        let mut c = ScaleCalibration::default();
+        assert_eq!(c.noise_factor(), 1.0);
+        // Too few intervals: nothing applies yet, however large.
+        for i in 0..9 {
+            c.push_noise(
+                f64::from(i) * 0.25,
+                f64::from(i + 1) * 0.25,
+                &Vector3::repeat(5.0),
+            );
+        }
+        assert_eq!(c.noise_factor(), 1.0);
+
+        // White residuals within their stated deviation: the stated covariance stands.
+        let mut white = ScaleCalibration::default();
+        ar1(&mut white, 0.0, 1.0, 2000, 0.0);
+        let f = white.noise_factor();
+        assert!((1.0..1.3).contains(&f), "white, unit variance: {f}");
+        // Smaller than stated: never trusted more than stated (the correlation estimated over
+        // ~50 intervals scatters about 0 by ~0.14).
+        let mut small = ScaleCalibration::default();
+        ar1(&mut small, 0.0, 0.3, 2000, 0.0);
+        let f = small.noise_factor();
+        assert!((1.0..1.3).contains(&f), "white, 0.3 of the deviation: {f}");
+        // Twice the stated deviation, white: four times the variance.
+        let mut wide = ScaleCalibration::default();
+        ar1(&mut wide, 0.0, 2.0, 2000, 0.0);
+        let f = wide.noise_factor();
+        assert!((3.0..5.2).contains(&f), "white, twice the deviation: {f}");
+        // Correlated at 0.6 with unit variance: (1 + 0.6) / (1 - 0.6) = 4.
+        let mut corr = ScaleCalibration::default();
+        ar1(&mut corr, 0.6, 1.0, 2000, 0.0);
+        let f = corr.noise_factor();
+        assert!((2.5..6.0).contains(&f), "correlated 0.6: {f}");
+        // A lasting bias reads as full correlation: the largest factor.
+        let mut bias = ScaleCalibration::default();
+        for i in 0..100 {
+            let t = f64::from(i) * 0.25;
+            bias.push_noise(t, t + 0.25, &Vector3::new(0.0, 3.0, 0.0));
+        }
+        assert_eq!(bias.noise_factor(), NOISE_FACTOR_MAX);
+        // The same residuals over intervals that do not follow each other give no correlation:
+        // only the variance (3 on one axis: a mean square of 3 over the axes).
+        let mut apart = ScaleCalibration::default();
+        for i in 0..100 {
+            let t = f64::from(i);
+            apart.push_noise(t, t + 0.25, &Vector3::new(0.0, 3.0, 0.0));
+        }
+        assert!(
+            (apart.noise_factor() - 3.0).abs() < 1e-9,
+            "{}",
+            apart.noise_factor()
+        );
+        // Non-finite residuals are skipped.
+        let before = apart.noise_factor();
+        apart.push_noise(200.0, 200.25, &Vector3::new(f64::NAN, 0.0, 0.0));
+        assert_eq!(apart.noise_factor(), before);
+        // The recent intervals weigh more: after white residuals the bias is forgotten.
+        ar1(&mut bias, 0.0, 1.0, 1000, 25.0);
+        assert!(bias.noise_factor() < 1.5, "{}", bias.noise_factor());
     }
 }

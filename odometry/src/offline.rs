@@ -222,6 +222,9 @@ pub struct OfflineResult {
     pub time_offset: Option<(f64, f64, String)>,
     /// What became of the learned motions given to [`run_with_motions`] (zero otherwise).
     pub learned: crate::learned::LearnedCounters,
+    /// The factor the filter applied to the learned measurements' stated covariance at the end
+    /// of the run ([`crate::learned::LearnedConfig::adapt_noise`]; 1 when not adapted).
+    pub learned_noise_factor: f64,
     /// The Doppler quantisation step \[m/s\]: the configured one (the `.cfg`'s, or the
     /// caller's) and the one the radial velocities showed, which replaced it
     /// ([`crate::runner::Runner::doppler_step`]).
@@ -420,6 +423,7 @@ pub fn run_with_motions(
             .zip(offset_why)
             .map(|((o, sd), why)| (o, sd, why)),
         learned: *runner.learned_counters(),
+        learned_noise_factor: runner.learned_noise_factor(),
         doppler_step: runner.doppler_step(),
         imu_noise,
     })

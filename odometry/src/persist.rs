@@ -35,8 +35,8 @@ pub const RECOMMENDED_WINDOW_S: f64 = 0.125;
 /// Settings of the persistence weighting.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PersistConfig {
-    /// How far back a point may have been seen \[s\] (0, the default: off, every point weighs
-    /// 1). [`RECOMMENDED_WINDOW_S`] is the setting chosen on the validation sets. Keep it off a
+    /// How far back a point may have been seen \[s\] (default [`RECOMMENDED_WINDOW_S`], the
+    /// setting chosen on the validation sets; 0: off, every point weighs 1). Keep it off a
     /// multiple of the frame period: a frame exactly one window back is in or out by the clock's
     /// jitter, and runs of the same data differ.
     pub window_s: f64,
@@ -49,10 +49,9 @@ pub struct PersistConfig {
 
 impl Default for PersistConfig {
     fn default() -> Self {
-        // Off by default: with it on, the learned fusion loses more often to the filter than
-        // the checks allow (docs/odometry.md, "Points seen again").
+        // Chosen on the validation sets (docs/odometry.md, "Points seen again").
         PersistConfig {
-            window_s: 0.0,
+            window_s: RECOMMENDED_WINDOW_S,
             radius_m: 0.3,
             fresh_weight: 0.25,
         }

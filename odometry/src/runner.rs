@@ -575,6 +575,16 @@ impl Runner {
         }
     }
 
+    /// The factor on the learned measurements' stated covariance (1 when not adapted;
+    /// [`crate::learned::ScaleCalibration::noise_factor`]).
+    pub fn learned_noise_factor(&self) -> f64 {
+        if self.cfg.learned.adapt_noise {
+            self.scale.noise_factor()
+        } else {
+            1.0
+        }
+    }
+
     /// Whether learned measurements are applied (the online check has not failed, or is off).
     pub fn learned_trusted(&self) -> bool {
         self.monitor.trusted()
@@ -646,6 +656,11 @@ impl Runner {
             if c.calibrate_scale {
                 self.scale.push(&d, &f);
             }
+            if c.adapt_noise {
+                let s = c.deviation(&(d * k), m.translation_std);
+                self.scale
+                    .push_noise(m.t_from, m.t_to, &(d * k - f).component_div(&s));
+            }
         }
         let v_filter = moved / dt;
         // The online check judges the network before its offset is taken off: the offset
@@ -677,6 +692,13 @@ impl Runner {
         if !trusted {
             return Outcome::Suspended(nis);
         }
+        // The check and the gate judge the stated deviation; the update weighs what the
+        // covered intervals measured of the network's error.
+        let rm = if c.adapt_noise {
+            rm * self.scale.noise_factor()
+        } else {
+            rm
+        };
         rio.world_velocity_update(&y, &rm);
         Outcome::Applied(nis)
     }

@@ -146,6 +146,10 @@ pub struct LearnedSummary {
     pub invalid: u64,
     /// Mean NIS of the evaluated ones (3 when their stated uncertainty is right).
     pub nis_mean: Option<f64>,
+    /// The factor the filter applied to their stated covariance at the end, from their error
+    /// where the radar covered the motion (1: as stated; docs/model.md, "Fusion").
+    #[serde(default)]
+    pub noise_factor: Option<f64>,
     /// Whether the online check switched them off (`auto` then handed over to Doppler).
     pub switched_off: bool,
     /// Whether they were being applied when the run ended.

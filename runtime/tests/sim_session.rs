@@ -340,11 +340,14 @@ fn offline_run_reproduces_milliego_odometry_with_a_mems_imu() {
 
 #[test]
 fn offline_run_reproduces_milliego_odometry_with_points_seen_again_weighed() {
-    // `run --persist-window` and `odometry --persist-window`: the same poses, and the summary
-    // counts the points seen again as `odometry` does.
+    // Points seen again are weighed by default in `run` and `odometry`: the same poses, and the
+    // summary counts the points seen again as `odometry` does.
     let (d, s) = session(13);
-    let mut cfg = OfflineConfig::default();
-    cfg.persist.window_s = milliego_odometry::persist::RECOMMENDED_WINDOW_S;
+    let cfg = OfflineConfig::default();
+    assert_eq!(
+        cfg.persist.window_s,
+        milliego_odometry::persist::RECOMMENDED_WINDOW_S
+    );
     let summary = runtime_equals_odometry_with(&d, &s, &cfg);
     let f = summary
         .report
@@ -365,14 +368,17 @@ fn offline_run_reproduces_milliego_odometry_with_points_seen_again_weighed() {
         extra <= 150,
         "{extra} points more than offline: {f:?} vs {o:?}"
     );
-    let off = runtime_equals_odometry(&d, &s)
+    // `--persist-window 0`: off in both, nothing weighed.
+    let mut off_cfg = OfflineConfig::default();
+    off_cfg.persist.window_s = 0.0;
+    let off = runtime_equals_odometry_with(&d, &s, &off_cfg)
         .report
         .filter
         .expect("counters");
     assert_eq!(
         (off.frames_weighed, off.points_seen_again, off.points_fresh),
         (0, 0, 0),
-        "off by default"
+        "off with a window of 0"
     );
 }
 

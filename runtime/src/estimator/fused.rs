@@ -127,6 +127,7 @@ impl Estimator for Fused {
             no_anchor: c.no_anchor,
             invalid: c.invalid,
             nis_mean: c.nis_mean(),
+            noise_factor: Some(r.learned_noise_factor()),
             switched_off: c.switched_off > 0,
             in_use_at_end: self.model_off.is_none() && r.learned_trusted(),
             model_windows: self.model.steps(),
