@@ -79,13 +79,19 @@ fn the_default_is_not_worse_than_doppler_on_unseen_seeds() {
         let (a, b) = (ate(&s, &auto), ate(&s, &dop));
         let l = &j["learned"];
         println!(
-            "{family} {motion} {seed}: auto {a:.3} m, doppler {b:.3} m; learned applied {} gated {} switched off {}",
-            l["applied"], l["gated"], l["switched_off"]
+            "{family} {motion} {seed}: auto {a:.3} m, doppler {b:.3} m; learned applied {} gated {} switched off {}, deviation widened {}x",
+            l["applied"], l["gated"], l["switched_off"], l["noise_factor"]
         );
         assert_eq!(j["estimator"], "auto");
         assert!(l["applied"].as_u64() > Some(0), "{j}");
+        let widened = l["noise_factor"]
+            .as_f64()
+            .expect("the summary's noise factor");
+        assert!((1.0..=25.0).contains(&widened), "{j}");
         // Within 10% of Doppler plus 5 cm: the margin issue 19 asks for is 10% alone, which
-        // two of these sessions miss by a few millimetres (office headworn 0.368 against 0.334 m).
+        // one of these sessions misses (atrium handheld 0.313 against 0.262 m; before points seen
+        // again and the widened deviation, office headworn 0.368 against 0.334 m and another by
+        // a few millimetres).
         assert!(
             a <= b * 1.1 + 0.05,
             "{family} {motion} {seed}: auto {a:.3} m vs doppler {b:.3} m"
@@ -93,8 +99,8 @@ fn the_default_is_not_worse_than_doppler_on_unseen_seeds() {
         sum_auto += a;
         sum_dop += b;
     }
-    // Over 20 s the filter alone has drifted little, and the two are about even (measured: 0.183
-    // against 0.174 m); over the benchmark's 60 s sessions fused is 22% better (README).
+    // Over 20 s the filter alone has drifted little, and the two are about even (measured: 0.127
+    // against 0.119 m); over the benchmark's 60 s sessions fused is 33% better (README).
     println!(
         "mean: auto {:.3} m, doppler {:.3} m",
         sum_auto / 6.0,
