@@ -578,23 +578,13 @@ mod calibration_tests {
         assert_eq!(c.scale(), 1.0);
     }
 
-    /// Residuals of an AR(1) process with lag-1 correlation `rho` and unit variance, pushed as
-    /// consecutive intervals of 0.25 s (a small deterministic generator: the test needs no
-    /// randomness crate).
+    /// Residuals of an AR(1) process with lag-1 correlation `rho` and deviation `sigma`, pushed
+    /// as consecutive intervals of 0.25 s from `t0` (seeded: the same every run).
     fn ar1(c: &mut ScaleCalibration, rho: f64, sigma: f64, n: usize, t0: f64) -> f64 {
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut normal = move || {
-            // Sum of 12 uniforms less 6: mean 0, variance 1.
-            (0..12)
-                .map(|_| {
-                    state ^= state << 13;
-                    state ^= state >> 7;
-                    state ^= state << 17;
-                    (state >> 11) as f64 / (1u64 << 53) as f64
-                })
-                .sum::<f64>()
-                - 6.0
-        };
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(29);
+        // Sum of 12 uniforms less 6: mean 0, variance 1.
+        let mut normal = move || (0..12).map(|_| rng.gen::<f64>()).sum::<f64>() - 6.0;
         let mut e = Vector3::new(normal(), normal(), normal()) * sigma;
         let k = (1.0 - rho * rho).sqrt();
         let mut t = t0;
