@@ -166,7 +166,7 @@ impl ScaleCalibration {
     /// One interval the radar covered, from `t_from` to `t_to` \[s\]: the network's translation
     /// (scaled) less the filter's, per body axis, over the measurement's stated deviation
     /// ([`LearnedConfig::deviation`]; unitless). Consecutive intervals (the one ending where
-    /// this one starts, within 1 ms) give the correlation.
+    /// this one starts, within the keyframe tolerance of 1 ms) give the correlation.
     pub fn push_noise(&mut self, t_from: f64, t_to: f64, z: &nalgebra::Vector3<f64>) {
         if !(z.iter().all(|x| x.is_finite()) && t_from.is_finite() && t_to.is_finite()) {
             return;
@@ -174,7 +174,7 @@ impl ScaleCalibration {
         self.noise_sq = NOISE_FORGET * self.noise_sq + z.norm_squared() / 3.0;
         self.noise_weight = NOISE_FORGET * self.noise_weight + 1.0;
         if let Some((t, prev)) = self.last_residual {
-            if (t - t_from).abs() <= 1e-3 {
+            if (t - t_from).abs() <= crate::runner::ANCHOR_TOLERANCE_S {
                 self.noise_lag = NOISE_FORGET * self.noise_lag + z.dot(&prev) / 3.0;
                 self.noise_lag_weight = NOISE_FORGET * self.noise_lag_weight + 1.0;
             }

@@ -77,8 +77,9 @@ pub const STACK_MIN_INLIERS: usize = 8;
 /// Share of the stacked points that must agree with a velocity from stacked frames.
 pub const STACK_MIN_INLIER_SHARE: f32 = 0.5;
 
-/// Largest difference between a learned measurement's keyframe time and a frame pose's \[s\].
-const ANCHOR_TOLERANCE_S: f64 = 1e-3;
+/// Largest difference between two keyframe times taken as the same \[s\]: a learned
+/// measurement's and a frame pose's, or one measurement's end and the next one's start.
+pub(crate) const ANCHOR_TOLERANCE_S: f64 = 1e-3;
 
 /// The health rule: whether a filter with `updates` applied radar updates (and rest updates, which
 /// pin the velocity as well) and `rejected_in_row` frames rejected in a row may guide the next
