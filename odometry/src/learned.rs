@@ -24,7 +24,7 @@
 //! The network's errors are not independent from one interval to the next, as the update assumes.
 //! Where the radar covered an interval, the network's residual against the filter, over its
 //! stated deviation, measures that error; the update's covariance is widened by what those
-//! residuals say ([`LearnedConfig::adapt_noise`], [`ScaleCalibration::noise_factor`]: their
+//! residuals say ([`LearnedConfig::adapt_noise`], [`Calibration::noise_factor`]: their
 //! variance beyond the stated one, times `(1 + rho) / (1 - rho)` for their lag-1 correlation
 //! `rho`). The gate and the online check judge the stated deviation.
 //!
@@ -78,7 +78,7 @@ pub struct LearnedConfig {
     /// would absorb a wrong axis convention too). Off by default (docs/model.md, "Fusion").
     pub calibrate_offset: bool,
     /// Widen the stated deviation by what the intervals the radar covered say of the network's
-    /// error ([`ScaleCalibration::noise_factor`]): its variance beyond the stated one and its
+    /// error ([`Calibration::noise_factor`]): its variance beyond the stated one and its
     /// correlation between consecutive intervals. A filter taking correlated measurements as
     /// independent trusts their mean too much: for errors with lag-1 correlation `rho` the mean
     /// of many has `(1 + rho) / (1 - rho)` times the variance that independence implies.
@@ -109,27 +109,51 @@ pub const NOISE_RHO_MAX: f64 = 0.8;
 /// The factor on the learned measurements' covariance is kept within [1, this].
 pub const NOISE_FACTOR_MAX: f64 = 25.0;
 
-/// The online calibration of the network's scale ([`LearnedConfig::calibrate_scale`]), velocity
-/// offset ([`LearnedConfig::calibrate_offset`]) and noise ([`LearnedConfig::adapt_noise`])
-/// against the filter.
+/// An exponentially forgotten mean: each push multiplies the sum and its weight by `forget` and
+/// adds the value with weight 1, so a value `k` pushes old counts `forget^k` (`1 / (1 - forget)`
+/// values in all once the sum has settled).
 #[derive(Debug, Clone, Copy, Default)]
-pub struct ScaleCalibration {
+struct ForgottenMean<T> {
+    sum: T,
+    weight: f64,
+}
+
+impl<T> ForgottenMean<T>
+where
+    T: Copy
+        + core::ops::Mul<f64, Output = T>
+        + core::ops::Add<Output = T>
+        + core::ops::Div<f64, Output = T>,
+{
+    fn push(&mut self, forget: f64, value: T) {
+        self.sum = self.sum * forget + value;
+        self.weight = forget * self.weight + 1.0;
+    }
+
+    /// The mean once the weight reached `min_weight`.
+    fn mean(&self, min_weight: f64) -> Option<T> {
+        (self.weight >= min_weight).then(|| self.sum / self.weight)
+    }
+}
+
+/// The online calibration of the network against the filter: its scale
+/// ([`LearnedConfig::calibrate_scale`]), velocity offset ([`LearnedConfig::calibrate_offset`]) and
+/// noise ([`LearnedConfig::adapt_noise`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Calibration {
+    // The scale's forgotten sums of `learned . filter` and `|learned|^2` [m^2].
     num: f64,
     den: f64,
-    // The offset's forgotten sum of residual velocities (body frame at `from`) and its weight.
-    offset_sum: nalgebra::Vector3<f64>,
-    offset_weight: f64,
-    // The noise estimate: the forgotten sums of the normalised residual's square and of the
-    // product of consecutive ones (each a mean over the axes), their weights, and the last
-    // residual with the time it ended.
-    noise_sq: f64,
-    noise_weight: f64,
-    noise_lag: f64,
-    noise_lag_weight: f64,
+    // Residual velocities (body frame at `from`) [m/s].
+    offset: ForgottenMean<nalgebra::Vector3<f64>>,
+    // The normalised residual's square and the product of consecutive ones (each a mean over the
+    // axes), and the last residual with the time it ended.
+    noise_sq: ForgottenMean<f64>,
+    noise_lag: ForgottenMean<f64>,
     last_residual: Option<(f64, nalgebra::Vector3<f64>)>,
 }
 
-impl ScaleCalibration {
+impl Calibration {
     /// The factor to apply now (1 until enough distance was seen).
     pub fn scale(&self) -> f64 {
         if self.den < SCALE_MIN_SUM_M2 || !(self.num / self.den).is_finite() {
@@ -139,7 +163,11 @@ impl ScaleCalibration {
     }
 
     /// One interval: the network's translation `learned` and the filter's `filter` (same frame).
-    pub fn push(&mut self, learned: &nalgebra::Vector3<f64>, filter: &nalgebra::Vector3<f64>) {
+    pub fn push_scale(
+        &mut self,
+        learned: &nalgebra::Vector3<f64>,
+        filter: &nalgebra::Vector3<f64>,
+    ) {
         self.num = SCALE_FORGET * self.num + learned.dot(filter);
         self.den = SCALE_FORGET * self.den + learned.norm_squared();
     }
@@ -147,19 +175,17 @@ impl ScaleCalibration {
     /// The network's velocity offset to take off now \[m/s, body frame at `from`\] (zero until
     /// [`OFFSET_MIN_WEIGHT`] intervals were seen; [`LearnedConfig::calibrate_offset`]).
     pub fn offset(&self) -> nalgebra::Vector3<f64> {
-        if self.offset_weight < OFFSET_MIN_WEIGHT || !self.offset_sum.iter().all(|x| x.is_finite())
-        {
-            return nalgebra::Vector3::zeros();
-        }
-        self.offset_sum / self.offset_weight
+        self.offset
+            .mean(OFFSET_MIN_WEIGHT)
+            .filter(|o| o.iter().all(|x| x.is_finite()))
+            .unwrap_or_else(nalgebra::Vector3::zeros)
     }
 
     /// One interval the radar covered: the network's mean velocity over it (scaled, before the
     /// offset) less the filter's \[m/s, body frame at `from`\].
     pub fn push_offset(&mut self, residual_velocity: &nalgebra::Vector3<f64>) {
         if residual_velocity.iter().all(|x| x.is_finite()) {
-            self.offset_sum = OFFSET_FORGET * self.offset_sum + residual_velocity;
-            self.offset_weight = OFFSET_FORGET * self.offset_weight + 1.0;
+            self.offset.push(OFFSET_FORGET, *residual_velocity);
         }
     }
 
@@ -171,12 +197,10 @@ impl ScaleCalibration {
         if !(z.iter().all(|x| x.is_finite()) && t_from.is_finite() && t_to.is_finite()) {
             return;
         }
-        self.noise_sq = NOISE_FORGET * self.noise_sq + z.norm_squared() / 3.0;
-        self.noise_weight = NOISE_FORGET * self.noise_weight + 1.0;
+        self.noise_sq.push(NOISE_FORGET, z.norm_squared() / 3.0);
         if let Some((t, prev)) = self.last_residual {
             if (t - t_from).abs() <= crate::runner::ANCHOR_TOLERANCE_S {
-                self.noise_lag = NOISE_FORGET * self.noise_lag + z.dot(&prev) / 3.0;
-                self.noise_lag_weight = NOISE_FORGET * self.noise_lag_weight + 1.0;
+                self.noise_lag.push(NOISE_FORGET, z.dot(&prev) / 3.0);
             }
         }
         self.last_residual = Some((t_to, *z));
@@ -190,14 +214,12 @@ impl ScaleCalibration {
     /// intervals were seen; `v` below 1 counts as 1 (the network is never trusted more than
     /// stated). Both moments are taken about zero: a lasting bias reads as correlation.
     pub fn noise_factor(&self) -> f64 {
-        if self.noise_weight < NOISE_MIN_WEIGHT {
+        let Some(v) = self.noise_sq.mean(NOISE_MIN_WEIGHT) else {
             return 1.0;
-        }
-        let v = self.noise_sq / self.noise_weight;
-        let rho = if self.noise_lag_weight >= NOISE_MIN_WEIGHT && v > 0.0 {
-            (self.noise_lag / self.noise_lag_weight / v).clamp(0.0, NOISE_RHO_MAX)
-        } else {
-            0.0
+        };
+        let rho = match self.noise_lag.mean(NOISE_MIN_WEIGHT) {
+            Some(lag) if v > 0.0 => (lag / v).clamp(0.0, NOISE_RHO_MAX),
+            _ => 0.0,
         };
         let f = v.max(1.0) * (1.0 + rho) / (1.0 - rho);
         if f.is_finite() {
@@ -554,7 +576,7 @@ mod calibration_tests {
 
     #[test]
     fn the_offset_is_the_forgotten_mean_of_the_residuals_once_enough_were_seen() {
-        let mut c = ScaleCalibration::default();
+        let mut c = Calibration::default();
         let r = Vector3::new(0.4, -0.1, 0.0);
         // Less than OFFSET_MIN_WEIGHT of forgotten weight (5 intervals weigh 4.52): nothing
         // taken off yet.
@@ -580,7 +602,7 @@ mod calibration_tests {
 
     /// Residuals of an AR(1) process with lag-1 correlation `rho` and deviation `sigma`, pushed
     /// as consecutive intervals of 0.25 s from `t0` (seeded: the same every run).
-    fn ar1(c: &mut ScaleCalibration, rho: f64, sigma: f64, n: usize, t0: f64) -> f64 {
+    fn ar1(c: &mut Calibration, rho: f64, sigma: f64, n: usize, t0: f64) -> f64 {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(29);
         // Sum of 12 uniforms less 6: mean 0, variance 1.
@@ -598,7 +620,7 @@ mod calibration_tests {
 
     #[test]
     fn the_noise_factor_follows_the_residuals_variance_and_correlation() {
-        let mut c = ScaleCalibration::default();
+        let mut c = Calibration::default();
         assert_eq!(c.noise_factor(), 1.0);
         // Too few intervals: nothing applies yet, however large.
         for i in 0..9 {
@@ -611,28 +633,28 @@ mod calibration_tests {
         assert_eq!(c.noise_factor(), 1.0);
 
         // White residuals within their stated deviation: the stated covariance stands.
-        let mut white = ScaleCalibration::default();
+        let mut white = Calibration::default();
         ar1(&mut white, 0.0, 1.0, 2000, 0.0);
         let f = white.noise_factor();
         assert!((1.0..1.3).contains(&f), "white, unit variance: {f}");
         // Smaller than stated: never trusted more than stated (the correlation estimated over
         // ~50 intervals scatters about 0 by ~0.14).
-        let mut small = ScaleCalibration::default();
+        let mut small = Calibration::default();
         ar1(&mut small, 0.0, 0.3, 2000, 0.0);
         let f = small.noise_factor();
         assert!((1.0..1.3).contains(&f), "white, 0.3 of the deviation: {f}");
         // Twice the stated deviation, white: four times the variance.
-        let mut wide = ScaleCalibration::default();
+        let mut wide = Calibration::default();
         ar1(&mut wide, 0.0, 2.0, 2000, 0.0);
         let f = wide.noise_factor();
         assert!((3.0..5.2).contains(&f), "white, twice the deviation: {f}");
         // Correlated at 0.6 with unit variance: (1 + 0.6) / (1 - 0.6) = 4.
-        let mut corr = ScaleCalibration::default();
+        let mut corr = Calibration::default();
         ar1(&mut corr, 0.6, 1.0, 2000, 0.0);
         let f = corr.noise_factor();
         assert!((2.5..6.0).contains(&f), "correlated 0.6: {f}");
         // A lasting bias reads as full correlation: the largest factor.
-        let mut bias = ScaleCalibration::default();
+        let mut bias = Calibration::default();
         for i in 0..100 {
             let t = f64::from(i) * 0.25;
             bias.push_noise(t, t + 0.25, &Vector3::new(0.0, 3.0, 0.0));
@@ -640,7 +662,7 @@ mod calibration_tests {
         assert_eq!(bias.noise_factor(), NOISE_FACTOR_MAX);
         // The same residuals over intervals that do not follow each other give no correlation:
         // only the variance (3 on one axis: a mean square of 3 over the axes).
-        let mut apart = ScaleCalibration::default();
+        let mut apart = Calibration::default();
         for i in 0..100 {
             let t = f64::from(i);
             apart.push_noise(t, t + 0.25, &Vector3::new(0.0, 3.0, 0.0));

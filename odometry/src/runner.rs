@@ -36,8 +36,7 @@ use crate::ego_velocity::{
 };
 use crate::lattice::DopplerLattice;
 use crate::learned::{
-    LearnedConfig, LearnedCounters, Monitor, Outcome, RelativeMotion, ScaleCalibration,
-    SCALE_COVERS,
+    Calibration, LearnedConfig, LearnedCounters, Monitor, Outcome, RelativeMotion, SCALE_COVERS,
 };
 use crate::persist::{radar_pose, PersistConfig, PointHistory};
 use crate::rest::{RestConfig, RestDetector, Verdict};
@@ -322,7 +321,7 @@ pub struct Runner {
     stacked: Vec<Detection>,
     monitor: Monitor,
     learned: LearnedCounters,
-    scale: ScaleCalibration,
+    calibration: Calibration,
     // Recent frames' points in the world frame, for the consensus weights.
     history: PointHistory,
 }
@@ -379,7 +378,7 @@ impl Runner {
             stacked: Vec::with_capacity(2 * STACK_POINTS),
             monitor: Monitor::new(cfg.learned),
             learned: LearnedCounters::default(),
-            scale: ScaleCalibration::default(),
+            calibration: Calibration::default(),
             history: PointHistory::new(cfg.persist),
         }
     }
@@ -570,17 +569,17 @@ impl Runner {
     /// The network's scale as calibrated against the filter (1 when not calibrated).
     pub fn learned_scale(&self) -> f64 {
         if self.cfg.learned.calibrate_scale {
-            self.scale.scale()
+            self.calibration.scale()
         } else {
             1.0
         }
     }
 
     /// The factor on the learned measurements' stated covariance (1 when not adapted;
-    /// [`crate::learned::ScaleCalibration::noise_factor`]).
+    /// [`crate::learned::Calibration::noise_factor`]).
     pub fn learned_noise_factor(&self) -> f64 {
         if self.cfg.learned.adapt_noise {
-            self.scale.noise_factor()
+            self.calibration.noise_factor()
         } else {
             1.0
         }
@@ -639,12 +638,12 @@ impl Runner {
         // The filter's own displacement over the interval, in the body frame at `from`.
         let f = r_from.transpose() * moved;
         let k = if c.calibrate_scale {
-            self.scale.scale()
+            self.calibration.scale()
         } else {
             1.0
         };
         let offset = if c.calibrate_offset {
-            self.scale.offset()
+            self.calibration.offset()
         } else {
             Vector3::zeros()
         };
@@ -652,14 +651,14 @@ impl Runner {
         // radar covered it.
         if u_to.saturating_sub(u_from) >= SCALE_COVERS {
             if c.calibrate_offset {
-                self.scale.push_offset(&((d * k - f) / dt));
+                self.calibration.push_offset(&((d * k - f) / dt));
             }
             if c.calibrate_scale {
-                self.scale.push(&d, &f);
+                self.calibration.push_scale(&d, &f);
             }
             if c.adapt_noise {
                 let s = c.deviation(&(d * k), m.translation_std);
-                self.scale
+                self.calibration
                     .push_noise(m.t_from, m.t_to, &(d * k - f).component_div(&s));
             }
         }
@@ -696,7 +695,7 @@ impl Runner {
         // The check and the gate judge the stated deviation; the update weighs what the
         // covered intervals measured of the network's error.
         let rm = if c.adapt_noise {
-            rm * self.scale.noise_factor()
+            rm * self.calibration.noise_factor()
         } else {
             rm
         };
