@@ -110,8 +110,8 @@ pub const NOISE_RHO_MAX: f64 = 0.8;
 pub const NOISE_FACTOR_MAX: f64 = 25.0;
 
 /// An exponentially forgotten mean: each push multiplies the sum and its weight by `forget` and
-/// adds the value with weight 1, so a value `k` pushes old counts `forget^k` (`1 / (1 - forget)`
-/// values in all once the sum has settled).
+/// adds the value with weight 1, so a value pushed `k` pushes ago counts `forget^k` (the weight
+/// settles at `1 / (1 - forget)`).
 #[derive(Debug, Clone, Copy, Default)]
 struct ForgottenMean<T> {
     sum: T,
