@@ -112,6 +112,12 @@ pub struct ScoreArgs {
     /// consecutive intervals): on or off (default: the shipped setting, docs/model.md "Fusion").
     #[arg(long, value_name = "on|off")]
     learned_noise: Option<String>,
+    /// For ground vehicles, intervals the radar did not cover calibrate too where the filter's
+    /// velocity deviation times the interval is at most this share of the network's stated
+    /// deviation (default: the shipped setting, docs/model.md "Fusion"; 0: covered intervals
+    /// only).
+    #[arg(long, value_name = "S")]
+    learned_known: Option<f64>,
     /// How far back a radar point counts as seen again in the ego-velocity consensus \[s\]
     /// (default: the shipped setting, 0.125, chosen on the validation sets; 0: off;
     /// docs/odometry.md "Points seen again")
@@ -339,6 +345,12 @@ pub fn run(a: ScoreArgs) -> Result<()> {
             "off" => false,
             o => return Err(format!("--learned-noise: {o:?} is neither on nor off").into()),
         };
+    }
+    if let Some(k) = a.learned_known {
+        if !(k.is_finite() && k >= 0.0) {
+            return Err(format!("--learned-known: {k} is not a share of 0 or more").into());
+        }
+        learned.known_share = k;
     }
     if let Some(n) = a.learned_doppler_covers {
         learned.doppler_covers = n;

@@ -83,6 +83,18 @@ pub struct LearnedConfig {
     /// independent trusts their mean too much: for errors with lag-1 correlation `rho` the mean
     /// of many has `(1 + rho) / (1 - rho)` times the variance that independence implies.
     pub adapt_noise: bool,
+    /// For a ground vehicle ([`crate::rio::RioConfig::nonholonomic_std`] finite), an interval
+    /// the radar did not cover calibrates too (scale, offset and noise, as above) when the
+    /// filter knows its own motion there: its velocity deviation (the root mean of its three
+    /// world velocity variances) times the interval's length is at most this share of the
+    /// network's stated deviation (its smallest axis). A car's filter holds its lateral and
+    /// vertical velocity by the constraint and integrates the rest from an IMU whose biases its
+    /// rest measured; a radar tilted at the sky or a sparse outdoor scene covers few intervals,
+    /// so without this the network's error there is never measured and it is trusted as stated.
+    /// Not for other rigs: a walker's filter claimed to know its velocity through stretches of
+    /// clutter-led radar velocities and the network's help there was lost (docs/model.md,
+    /// "Fusion"). 0: covered intervals only.
+    pub known_share: f64,
 }
 
 /// Radar updates over an interval for it to calibrate the scale ([`LearnedConfig::calibrate_scale`]).
@@ -146,10 +158,10 @@ pub struct Calibration {
     den: f64,
     // Residual velocities (body frame at `from`) [m/s].
     offset: ForgottenMean<nalgebra::Vector3<f64>>,
-    // The normalised residual's square and the product of consecutive ones (each a mean over the
-    // axes), and the last residual with the time it ended.
-    noise_sq: ForgottenMean<f64>,
-    noise_lag: ForgottenMean<f64>,
+    // The normalised residual's square and the product of consecutive ones, per body axis, and
+    // the last residual with the time it ended.
+    noise_sq: ForgottenMean<nalgebra::Vector3<f64>>,
+    noise_lag: ForgottenMean<nalgebra::Vector3<f64>>,
     last_residual: Option<(f64, nalgebra::Vector3<f64>)>,
 }
 
@@ -197,31 +209,39 @@ impl Calibration {
         if !(z.iter().all(|x| x.is_finite()) && t_from.is_finite() && t_to.is_finite()) {
             return;
         }
-        self.noise_sq.push(NOISE_FORGET, z.norm_squared() / 3.0);
+        self.noise_sq.push(NOISE_FORGET, z.component_mul(z));
         if let Some((t, prev)) = self.last_residual {
             if (t - t_from).abs() <= crate::runner::ANCHOR_TOLERANCE_S {
-                self.noise_lag.push(NOISE_FORGET, z.dot(&prev) / 3.0);
+                self.noise_lag.push(NOISE_FORGET, z.component_mul(&prev));
             }
         }
         self.last_residual = Some((t_to, *z));
     }
 
     /// The factor on the learned measurements' stated covariance ([`LearnedConfig::adapt_noise`]):
-    /// the normalised residual's mean square `v` (1 when the stated deviation is right; it holds
-    /// the filter's own error too, so it errs on the side of trusting the network less) times
-    /// `(1 + rho) / (1 - rho)` for their lag-1 correlation `rho` (clamped to [0,
-    /// [`NOISE_RHO_MAX`]]), within [1, [`NOISE_FACTOR_MAX`]]. 1 until [`NOISE_MIN_WEIGHT`]
-    /// intervals were seen; `v` below 1 counts as 1 (the network is never trusted more than
-    /// stated). Both moments are taken about zero: a lasting bias reads as correlation.
+    /// per body axis, the normalised residual's mean square `v` (1 when the stated deviation is
+    /// right; it holds the filter's own error too, so it errs on the side of trusting the network
+    /// less) times `(1 + rho) / (1 - rho)` for their lag-1 correlation `rho` (clamped to [0,
+    /// [`NOISE_RHO_MAX`]]): the variance of a mean of many such residuals over what independent
+    /// ones of the stated deviation would give; the largest over the axes. Within [1, [`NOISE_FACTOR_MAX`]] (the network is
+    /// never trusted more than stated); 1 until [`NOISE_MIN_WEIGHT`] intervals were seen. Both
+    /// moments are taken about zero: a lasting bias reads as correlation. The correlation alone
+    /// does not widen: residuals well within the stated deviation that drift together (the
+    /// filter's own slow error against a network that is right) stay at 1.
     pub fn noise_factor(&self) -> f64 {
         let Some(v) = self.noise_sq.mean(NOISE_MIN_WEIGHT) else {
             return 1.0;
         };
-        let rho = match self.noise_lag.mean(NOISE_MIN_WEIGHT) {
-            Some(lag) if v > 0.0 => (lag / v).clamp(0.0, NOISE_RHO_MAX),
-            _ => 0.0,
-        };
-        let f = v.max(1.0) * (1.0 + rho) / (1.0 - rho);
+        let lag = self.noise_lag.mean(NOISE_MIN_WEIGHT);
+        let f = (0..3)
+            .map(|i| {
+                let rho = match lag {
+                    Some(lag) if v[i] > 0.0 => (lag[i] / v[i]).clamp(0.0, NOISE_RHO_MAX),
+                    _ => 0.0,
+                };
+                v[i] * (1.0 + rho) / (1.0 - rho)
+            })
+            .fold(f64::NEG_INFINITY, f64::max);
         if f.is_finite() {
             f.clamp(1.0, NOISE_FACTOR_MAX)
         } else {
@@ -246,6 +266,8 @@ impl Default for LearnedConfig {
             calibrate_scale: true,
             calibrate_offset: false,
             adapt_noise: true,
+            // Chosen on the validation sets (docs/model.md, "Fusion").
+            known_share: 0.12,
         }
     }
 }
@@ -653,6 +675,22 @@ mod calibration_tests {
         ar1(&mut corr, 0.6, 1.0, 2000, 0.0);
         let f = corr.noise_factor();
         assert!((2.5..6.0).contains(&f), "correlated 0.6: {f}");
+        // Correlated at 0.8 but 0.3 of the deviation: 0.09 x 9 = 0.81, within what is stated.
+        let mut slow = Calibration::default();
+        ar1(&mut slow, 0.8, 0.3, 2000, 0.0);
+        let f = slow.noise_factor();
+        assert!(
+            (1.0..1.3).contains(&f),
+            "correlated 0.8, 0.3 of the deviation: {f}"
+        );
+        // Correlated at 0.8 with half the deviation: 0.25 x 9 = 2.25.
+        let mut half = Calibration::default();
+        ar1(&mut half, 0.8, 0.5, 2000, 0.0);
+        let f = half.noise_factor();
+        assert!(
+            (1.5..3.2).contains(&f),
+            "correlated 0.8, half the deviation: {f}"
+        );
         // A lasting bias reads as full correlation: the largest factor.
         let mut bias = Calibration::default();
         for i in 0..100 {
@@ -661,14 +699,15 @@ mod calibration_tests {
         }
         assert_eq!(bias.noise_factor(), NOISE_FACTOR_MAX);
         // The same residuals over intervals that do not follow each other give no correlation:
-        // only the variance (3 on one axis: a mean square of 3 over the axes).
+        // only the variance (3 on one axis: a mean square of 9 there; the other axes' 0 do not
+        // dilute it).
         let mut apart = Calibration::default();
         for i in 0..100 {
             let t = f64::from(i);
             apart.push_noise(t, t + 0.25, &Vector3::new(0.0, 3.0, 0.0));
         }
         assert!(
-            (apart.noise_factor() - 3.0).abs() < 1e-9,
+            (apart.noise_factor() - 9.0).abs() < 1e-9,
             "{}",
             apart.noise_factor()
         );

@@ -648,8 +648,16 @@ impl Runner {
             Vector3::zeros()
         };
         // The calibration learned from earlier intervals applies; then this one joins it if the
-        // radar covered it.
-        if u_to.saturating_sub(u_from) >= SCALE_COVERS {
+        // radar covered it, or if the filter of a ground vehicle knows its own motion over it
+        // ([`LearnedConfig::known_share`]).
+        let known = c.known_share > 0.0 && self.cfg.rio.nonholonomic_std.is_finite() && {
+            let velocity_std = (rio.covariance().fixed_view::<3, 3>(3, 3).trace() / 3.0)
+                .max(0.0)
+                .sqrt();
+            let stated = c.deviation(&(d * k), m.translation_std).min();
+            velocity_std * dt <= c.known_share * stated
+        };
+        if u_to.saturating_sub(u_from) >= SCALE_COVERS || known {
             if c.calibrate_offset {
                 self.calibration.push_offset(&((d * k - f) / dt));
             }
