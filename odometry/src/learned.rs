@@ -22,11 +22,13 @@
 //! of the gain as for radar updates ([`crate::rio::RioConfig::radar_heading`]).
 //!
 //! The network's errors are not independent from one interval to the next, as the update assumes.
-//! Where the radar covered an interval, the network's residual against the filter, over its
-//! stated deviation, measures that error; the update's covariance is widened by what those
-//! residuals say ([`LearnedConfig::adapt_noise`], [`Calibration::noise_factor`]: their
-//! variance beyond the stated one, times `(1 + rho) / (1 - rho)` for their lag-1 correlation
-//! `rho`). The gate and the online check judge the stated deviation.
+//! Where the radar covered an interval (or, for a ground vehicle, where the filter knows its
+//! own motion: [`LearnedConfig::known_share`]), the network's residual against the filter, over
+//! its stated deviation, measures that error; the update's covariance is widened by what those
+//! residuals say ([`LearnedConfig::adapt_noise`], [`Calibration::noise_factor`]: per body axis
+//! their mean square times `(1 + rho) / (1 - rho)` for their lag-1 correlation `rho`, the
+//! largest over the axes, never below 1). The gate and the online check judge the stated
+//! deviation.
 //!
 //! # Online consistency ([`Monitor`])
 //!
@@ -63,7 +65,8 @@ pub struct LearnedConfig {
     /// interval (the radar already saw the motion; 0: never skip).
     pub doppler_covers: u64,
     /// Calibrate the network's scale online against the filter: over intervals where the filter
-    /// applied at least [`SCALE_COVERS`] radar updates, the least-squares factor between the
+    /// applied at least [`SCALE_COVERS`] radar updates (and a ground vehicle's known ones,
+    /// [`LearnedConfig::known_share`]), the least-squares factor between the
     /// network's translation and the filter's (exponentially forgotten, [`SCALE_FORGET`]);
     /// every measurement is scaled by it (within [`SCALE_RANGE`]).
     pub calibrate_scale: bool,
@@ -77,9 +80,10 @@ pub struct LearnedConfig {
     /// online check ([`Monitor`]) judges each measurement before the offset is taken off (it
     /// would absorb a wrong axis convention too). Off by default (docs/model.md, "Fusion").
     pub calibrate_offset: bool,
-    /// Widen the stated deviation by what the intervals the radar covered say of the network's
-    /// error ([`Calibration::noise_factor`]): its variance beyond the stated one and its
-    /// correlation between consecutive intervals. A filter taking correlated measurements as
+    /// Widen the stated deviation by what the intervals the radar covered (and a ground
+    /// vehicle's known ones, [`LearnedConfig::known_share`]) say of the network's error
+    /// ([`Calibration::noise_factor`]): its variance and its correlation between consecutive
+    /// intervals. A filter taking correlated measurements as
     /// independent trusts their mean too much: for errors with lag-1 correlation `rho` the mean
     /// of many has `(1 + rho) / (1 - rho)` times the variance that independence implies.
     pub adapt_noise: bool,
@@ -193,7 +197,8 @@ impl Calibration {
             .unwrap_or_else(nalgebra::Vector3::zeros)
     }
 
-    /// One interval the radar covered: the network's mean velocity over it (scaled, before the
+    /// One interval the radar covered (or a vehicle's filter knew,
+    /// [`LearnedConfig::known_share`]): the network's mean velocity over it (scaled, before the
     /// offset) less the filter's \[m/s, body frame at `from`\].
     pub fn push_offset(&mut self, residual_velocity: &nalgebra::Vector3<f64>) {
         if residual_velocity.iter().all(|x| x.is_finite()) {
@@ -201,8 +206,9 @@ impl Calibration {
         }
     }
 
-    /// One interval the radar covered, from `t_from` to `t_to` \[s\]: the network's translation
-    /// (scaled) less the filter's, per body axis, over the measurement's stated deviation
+    /// One interval the radar covered (or a vehicle's filter knew), from `t_from` to `t_to`
+    /// \[s\]: the network's translation (scaled) less the filter's, per body axis, over the
+    /// measurement's stated deviation
     /// ([`LearnedConfig::deviation`]; unitless). Consecutive intervals (the one ending where
     /// this one starts, within the keyframe tolerance of 1 ms) give the correlation.
     pub fn push_noise(&mut self, t_from: f64, t_to: f64, z: &nalgebra::Vector3<f64>) {
@@ -223,8 +229,9 @@ impl Calibration {
     /// right; it holds the filter's own error too, so it errs on the side of trusting the network
     /// less) times `(1 + rho) / (1 - rho)` for their lag-1 correlation `rho` (clamped to [0,
     /// [`NOISE_RHO_MAX`]]): the variance of a mean of many such residuals over what independent
-    /// ones of the stated deviation would give; the largest over the axes. Within [1, [`NOISE_FACTOR_MAX`]] (the network is
-    /// never trusted more than stated); 1 until [`NOISE_MIN_WEIGHT`] intervals were seen. Both
+    /// ones of the stated deviation would give; the largest over the axes. Within [1,
+    /// [`NOISE_FACTOR_MAX`]] (the network is never trusted more than stated); 1 until
+    /// [`NOISE_MIN_WEIGHT`] intervals were seen. Both
     /// moments are taken about zero: a lasting bias reads as correlation. The correlation alone
     /// does not widen: residuals well within the stated deviation that drift together (the
     /// filter's own slow error against a network that is right) stay at 1.
