@@ -650,14 +650,16 @@ impl Runner {
         // The calibration learned from earlier intervals applies; then this one joins it if the
         // radar covered it, or if the filter of a ground vehicle knows its own motion over it
         // ([`LearnedConfig::known_share`]).
-        let known = c.known_share > 0.0 && self.cfg.rio.nonholonomic_std.is_finite() && {
-            let velocity_std = (rio.covariance().fixed_view::<3, 3>(3, 3).trace() / 3.0)
-                .max(0.0)
-                .sqrt();
-            let stated = c.deviation(&(d * k), m.translation_std).min();
-            velocity_std * dt <= c.known_share * stated
-        };
-        if u_to.saturating_sub(u_from) >= SCALE_COVERS || known {
+        let stated = c.deviation(&(d * k), m.translation_std);
+        let covered = u_to.saturating_sub(u_from) >= SCALE_COVERS;
+        let known =
+            !covered && c.known_share > 0.0 && self.cfg.rio.nonholonomic_std.is_finite() && {
+                let velocity_std = (rio.covariance().fixed_view::<3, 3>(3, 3).trace() / 3.0)
+                    .max(0.0)
+                    .sqrt();
+                velocity_std * dt <= c.known_share * stated.min()
+            };
+        if covered || known {
             if c.calibrate_offset {
                 self.calibration.push_offset(&((d * k - f) / dt));
             }
@@ -665,9 +667,8 @@ impl Runner {
                 self.calibration.push_scale(&d, &f);
             }
             if c.adapt_noise {
-                let s = c.deviation(&(d * k), m.translation_std);
                 self.calibration
-                    .push_noise(m.t_from, m.t_to, &(d * k - f).component_div(&s));
+                    .push_noise(m.t_from, m.t_to, &(d * k - f).component_div(&stated));
             }
         }
         let v_filter = moved / dt;
