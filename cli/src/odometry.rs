@@ -36,8 +36,10 @@ pub struct OdometryArgs {
     /// velocity resolution when the session has a .cfg, else continuous.
     #[arg(long)]
     doppler_step: Option<f32>,
-    /// Near field in m: points closer than this with zero Doppler are skipped as leakage
-    /// (default 0: off; 1.0 for radars with leakage).
+    /// Near field in m: points closer than this with zero Doppler are skipped as leakage.
+    /// Default: off until the points show leakage (near points at zero Doppler where the
+    /// filter's motion says a static point could not read zero; reported as `near_field`), then
+    /// 1.0. Stating it (0: off) turns that test off
     #[arg(long)]
     near_field: Option<f32>,
     /// Let radar updates correct the heading and the vertical gyro bias (off by default: body
@@ -159,6 +161,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
     }
     if let Some(m) = a.near_field {
         cfg.ego.near_field_m = m;
+        cfg.ego.near_field_from_data = false;
     }
     let r = run_offline(&session, &cfg).map_err(|e| format!("{}: {e}", a.session.display()))?;
     write_tum(&a.out, &r.trajectory)?;
@@ -174,6 +177,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
             "doppler_step": doppler_step_json(r.doppler_step, a.doppler_step.is_some()),
             "imu_noise": r.imu_noise,
             "near_field_points": r.near_field_points,
+            "near_field": near_field_json(r.near_field, a.near_field.is_some()),
             "ground_vehicle": if a.vehicle { json!({"applied": r.nonholonomic.0, "gated": r.nonholonomic.1}) } else { json!("not asked (--vehicle)") },
             "radar_stream": {"frames_bad": r.radar.bad, "bytes_skipped": r.radar.bytes_skipped},
             "imu_stream": {"frames_bad": r.imu.bad, "bytes_skipped": r.imu.bytes_skipped, "not_samples": r.imu.not_samples, "pressure": r.imu.pressure},
@@ -185,6 +189,26 @@ pub fn run(a: OdometryArgs) -> Result<()> {
         })
     );
     Ok(())
+}
+
+/// The near field's report: the range in use [m] and where it came from, with the leakage test's
+/// counts when it was left to the data.
+fn near_field_json(
+    (range_m, learned): (f32, Option<(u32, u32, bool)>),
+    stated: bool,
+) -> serde_json::Value {
+    let from = match learned {
+        _ if stated => "--near-field",
+        Some((_, _, true)) => "leakage seen in the points",
+        Some(_) => "off: the points showed no leakage",
+        None => "off",
+    };
+    json!({
+        "used_m": range_m,
+        "from": from,
+        "tested_points": learned.map(|l| l.0),
+        "tested_at_zero_doppler": learned.map(|l| l.1),
+    })
 }
 
 /// The Doppler step's report: configured, seen in the data, and the one used [m/s].

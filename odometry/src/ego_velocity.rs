@@ -76,9 +76,14 @@ pub struct Config {
     /// TX-RX leakage or reflections off the mount, which stay at zero Doppler whatever the
     /// motion: they do not vote for a consensus (a frame of leakage and a few real points must
     /// not read "at rest"), though the least squares keeps them where they fit. 0 (the default)
-    /// turns this off: at rest with few far points it lets ghosts outvote the zero; set it (1 m)
-    /// for rigs whose radar shows leakage.
+    /// turns this off: at rest with few far points it lets ghosts outvote the zero, and without
+    /// leakage the near points at zero Doppler are real static points abeam. Set it (1 m) for
+    /// rigs whose radar shows leakage, or leave it to the data ([`Config::near_field_from_data`]).
     pub near_field_m: f32,
+    /// Turn the near field on ([`crate::leakage::LEAK_RANGE_M`]) once the points show leakage
+    /// ([`crate::leakage`]; the runner does this; default on). Off when the caller states
+    /// [`Config::near_field_m`].
+    pub near_field_from_data: bool,
     /// RNG seed (the estimate is deterministic for a seed and input).
     pub seed: u64,
 }
@@ -120,6 +125,7 @@ impl Default for Config {
             min_spread: 1e-3,
             min_range: 0.1,
             near_field_m: 0.0,
+            near_field_from_data: true,
             doppler_step: 0.0,
             step_from_data: true,
             seed: 0x5EED,
@@ -265,6 +271,11 @@ impl EgoVelocityEstimator {
     /// Sets the Doppler quantisation step \[m/s\] ([`Config::doppler_step`]).
     pub fn set_doppler_step(&mut self, step: f32) {
         self.cfg.doppler_step = step;
+    }
+
+    /// Sets the near field \[m\] ([`Config::near_field_m`]).
+    pub fn set_near_field(&mut self, range_m: f32) {
+        self.cfg.near_field_m = range_m;
     }
 
     /// Estimates the sensor velocity from one frame.

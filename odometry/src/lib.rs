@@ -5,6 +5,8 @@
 //!   pairs, with RANSAC against moving objects and multipath, a least-squares refinement, a
 //!   covariance, and degenerate geometry reported rather than silently wrong.
 //! * [`lattice`]: the Doppler quantisation step read from the radial velocities themselves.
+//! * [`leakage`]: near-field leakage (returns near the radar at zero Doppler whatever the motion)
+//!   read from the points and the filter's prediction.
 //! * [`rio`]: the error-state Kalman filter that fuses both (IMU propagation, radar velocity
 //!   updates, bias estimation, chi-square gating).
 //! * [`learned`]: the learned model's relative motion as a filter measurement, and the online
@@ -23,6 +25,7 @@
 
 pub mod ego_velocity;
 pub mod lattice;
+pub mod leakage;
 pub mod learned;
 pub mod offline;
 pub mod persist;

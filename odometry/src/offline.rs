@@ -231,6 +231,10 @@ pub struct OfflineResult {
     pub doppler_step: (f32, Option<f32>),
     /// The IMU noise the filter assumed and where it came from ([`imu_noise_of`]).
     pub imu_noise: String,
+    /// The near field in use at the end \[m\] (0: off) and, when it was left to the data, the
+    /// near points tested for leakage, how many read zero Doppler and whether that turned it on
+    /// ([`crate::runner::Runner::near_field_leakage`]).
+    pub near_field: (f32, Option<(u32, u32, bool)>),
 }
 
 /// Why a run could not start.
@@ -426,5 +430,6 @@ pub fn run_with_motions(
         learned_noise_factor: runner.learned_noise_factor(),
         doppler_step: runner.doppler_step(),
         imu_noise,
+        near_field: (runner.near_field_m(), runner.near_field_leakage()),
     })
 }

@@ -35,6 +35,7 @@ use crate::ego_velocity::{
     Config as EgoConfig, Detection, EgoVelocityEstimator, Estimate, Prior, Status,
 };
 use crate::lattice::DopplerLattice;
+use crate::leakage::{LeakageDetector, LEAK_RANGE_M};
 use crate::learned::{
     Calibration, LearnedConfig, LearnedCounters, Monitor, Outcome, RelativeMotion, SCALE_COVERS,
 };
@@ -292,6 +293,7 @@ pub struct Runner {
     dets: Vec<Detection>,
     // The Doppler step the frames' radial velocities show ([`EgoConfig::step_from_data`]).
     lattice: DopplerLattice,
+    leakage: LeakageDetector,
     // The step from the configuration, before the data's replaced it.
     configured_step: f32,
     rest: RestDetector,
@@ -361,6 +363,7 @@ impl Runner {
             est: Estimate::with_capacity(2 * STACK_POINTS),
             dets: Vec::with_capacity(1024),
             lattice: DopplerLattice::new(),
+            leakage: LeakageDetector::new(),
             configured_step: cfg.ego.doppler_step,
             rest: RestDetector::new(cfg.rest),
             rest_anchor: None,
@@ -834,6 +837,51 @@ impl Runner {
         (self.configured_step, seen.flatten().map(|q| q as f32))
     }
 
+    /// Near-field leakage as the points show it ([`crate::leakage`]): tested near points, how
+    /// many of them read zero Doppler, and whether the near field was turned on from them (None
+    /// when [`EgoConfig::near_field_from_data`] is off).
+    pub fn near_field_leakage(&self) -> Option<(u32, u32, bool)> {
+        self.cfg.ego.near_field_from_data.then(|| {
+            let (tested, zero) = self.leakage.counts();
+            (tested, zero, self.leakage.found())
+        })
+    }
+
+    /// The near field in use \[m\] ([`EgoConfig::near_field_m`]; 0: off).
+    pub fn near_field_m(&self) -> f32 {
+        self.cfg.ego.near_field_m
+    }
+
+    /// Looks for near-field leakage in a frame's points against the filter's prediction `prior`
+    /// of the radar's velocity and the frame's own estimate (the latest, when it gave one); once
+    /// found, the near field is left out of the vote from the next frame on.
+    fn learn_leakage(&mut self, dets: &[Detection], prior: Option<&Prior>) {
+        if !self.cfg.ego.near_field_from_data
+            || self.leakage.found()
+            || self.est.status != Status::Ok
+        {
+            return;
+        }
+        let Some(prior) = prior else {
+            return;
+        };
+        let frame = self.est.velocity.map(f64::from);
+        let gate = f64::from(self.cfg.ego.inlier_threshold());
+        let min_range = f64::from(self.cfg.ego.min_range);
+        if self.leakage.observe(
+            dets,
+            (&prior.velocity, &prior.covariance),
+            &frame,
+            gate,
+            min_range,
+        ) && self.cfg.ego.near_field_m < LEAK_RANGE_M
+        {
+            self.cfg.ego.near_field_m = LEAK_RANGE_M;
+            self.ego.set_near_field(LEAK_RANGE_M);
+            self.ego_stacked.set_near_field(LEAK_RANGE_M);
+        }
+    }
+
     /// Takes the Doppler step the stream shows, once it shows one, for the ego-velocity's gate
     /// and noise floor and the rest verdict's zero.
     fn learn_doppler_step(&mut self, dets: &[Detection]) {
@@ -930,6 +978,7 @@ impl Runner {
             radar_pose(&st.q, &p, &self.mount.rotation, &self.mount.translation)
         });
         let m = self.measure(t, dets, prior, pose);
+        self.learn_leakage(dets, prior.as_ref());
         let no_consensus = matches!(self.est.status, Status::NoConsensus { .. });
         let near_field = self.est.near_field;
         // The radar's verdict on rest: its own estimate (before the filter takes it) and the

@@ -106,6 +106,18 @@ pub struct FilterSummary {
     /// stated, docs/odometry.md "Radar noise adaptation"). None when no filter ran.
     #[serde(default)]
     pub radar_noise_scale: Option<f64>,
+    /// The near field in use at the end \[m\]: points this close at zero Doppler do not vote
+    /// for the ego-velocity (0: off; turned on, at 1 m, once the points showed near-field leakage,
+    /// docs/odometry.md "Near-field leakage").
+    #[serde(default)]
+    pub near_field_m: f32,
+    /// Near points the leakage test judged (their static Doppler clearly away from 0 under the
+    /// filter's motion), and how many of them read zero Doppler anyway.
+    #[serde(default)]
+    pub near_field_tested: (u32, u32),
+    /// Points that did not vote as possible near-field leakage.
+    #[serde(default)]
+    pub near_field_points: u64,
 }
 
 impl From<milliego_odometry::rio::RioCounters> for FilterSummary {

@@ -525,6 +525,56 @@ fn the_time_offset_uncertainty_is_consistent() {
 }
 
 #[test]
+fn near_field_leakage_is_read_from_the_points_and_only_where_there_is_some() {
+    // A sixth of the points are leakage within 1 m at zero Doppler whatever the motion: they
+    // pull each ego-velocity towards zero (the track comes out short). The runner finds them
+    // against the filter's motion and leaves the near field out of the vote; without leakage
+    // nothing is found and the run is the one with the test off, pose for pose.
+    let (mut sum_found, mut sum_kept) = (0.0, 0.0);
+    for (family, motion, seed) in [
+        (Family::Corridor, MotionKind::Robot, 21),
+        (Family::Office, MotionKind::Handheld, 22),
+    ] {
+        let mut sc = Scenario::new(family, motion, seed);
+        sc.duration_s = 40.0;
+        sc.near_field_share = 0.16;
+        let (_dir, s) = simulated(&sc);
+        let found = run(&s, &OfflineConfig::default()).expect("offline run");
+        let mut off = OfflineConfig::default();
+        off.ego.near_field_from_data = false;
+        let kept = run(&s, &off).expect("offline run");
+        let (range, learned) = found.near_field;
+        let (tested, zero, leaks) = learned.expect("left to the data by default");
+        let (a_found, a_kept) = (ate_of(&s, &found.trajectory), ate_of(&s, &kept.trajectory));
+        println!(
+            "{family:?}/{motion:?}/{seed}, 16% leakage: {zero} of {tested} tested near points at zero Doppler, near field {range} m, {} points not voting; ATE {a_found:.3} m against {a_kept:.3} m with every point voting",
+            found.near_field_points
+        );
+        assert!(leaks && range == 1.0, "{:?}", found.near_field);
+        assert!(found.near_field_points > 0);
+        assert_eq!(kept.near_field, (0.0, None));
+        assert_eq!(kept.near_field_points, 0);
+        sum_found += a_found;
+        sum_kept += a_kept;
+
+        sc.near_field_share = 0.0;
+        let (_dir, s) = simulated(&sc);
+        let clean = run(&s, &OfflineConfig::default()).expect("offline run");
+        let (range, learned) = clean.near_field;
+        let (tested, zero, leaks) = learned.expect("left to the data by default");
+        println!("  without leakage: {zero} of {tested} tested at zero Doppler");
+        assert!(!leaks && range == 0.0, "{:?}", clean.near_field);
+        assert!(tested > 0, "the test had points to judge");
+        let off_run = run(&s, &off).expect("offline run");
+        assert_eq!(clean.trajectory, off_run.trajectory);
+    }
+    assert!(
+        sum_found < 0.8 * sum_kept,
+        "{sum_found:.3} vs {sum_kept:.3} m over two sessions"
+    );
+}
+
+#[test]
 fn a_doppler_step_coarser_than_the_cfg_says_is_read_from_the_points() {
     // The radar reports Doppler in 0.42 m/s steps while its .cfg says 0.134 m/s bins (a
     // firmware that quantises coarser than its bins): a gate made for the .cfg's step rejects

@@ -73,6 +73,12 @@ impl Estimator for Classical {
                 points_fresh: p.fresh,
                 radar_nis_mean: self.runner.filter().and_then(|f| f.nis_mean()),
                 radar_noise_scale: self.runner.filter().map(|f| f.radar_noise_scale()),
+                near_field_m: self.runner.near_field_m(),
+                near_field_tested: self
+                    .runner
+                    .near_field_leakage()
+                    .map_or((0, 0), |(tested, zero, _)| (tested, zero)),
+                near_field_points: self.runner.counters().near_field_points,
                 ..self.runner.filter_counters().into()
             }
         })
