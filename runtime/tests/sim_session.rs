@@ -382,6 +382,34 @@ fn offline_run_reproduces_milliego_odometry_with_points_seen_again_weighed() {
     );
 }
 
+#[test]
+fn offline_run_reproduces_milliego_odometry_with_near_field_leakage() {
+    // A sixth of the points leak at zero Doppler within 1 m: both runs find it from the points
+    // against the filter's motion at the same frame (the same poses) and report it.
+    let mut sc = Scenario::new(Family::Office, MotionKind::Handheld, 22);
+    sc.duration_s = 12.0;
+    sc.near_field_share = 0.16;
+    let (d, s) = session_of(&sc);
+    let o = run_offline(&s, &OfflineConfig::default()).unwrap();
+    let f = runtime_equals_odometry(&d, &s)
+        .report
+        .filter
+        .expect("the Doppler filter's counters");
+    println!(
+        "runtime filter {f:?}, offline {:?}, {} points",
+        o.near_field, o.near_field_points
+    );
+    let (tested, zero, found) = o.near_field.1.expect("left to the data");
+    assert!(found && o.near_field.0 == 1.0, "{:?}", o.near_field);
+    assert_eq!(f.near_field_m, 1.0);
+    assert_eq!(f.near_field_tested, (tested, zero));
+    // The runtime's last frames past the last IMU sample aside, the same points left out.
+    assert!(
+        f.near_field_points >= o.near_field_points
+            && f.near_field_points <= o.near_field_points + 60
+    );
+}
+
 fn runtime_equals_odometry(
     d: &tempfile::TempDir,
     s: &Session,
