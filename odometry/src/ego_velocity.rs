@@ -80,9 +80,10 @@ pub struct Config {
     /// leakage the near points at zero Doppler are real static points abeam. Set it (1 m) for
     /// rigs whose radar shows leakage, or leave it to the data ([`Config::near_field_from_data`]).
     pub near_field_m: f32,
-    /// Turn the near field on ([`crate::leakage::LEAK_RANGE_M`]) once the points show leakage
-    /// ([`crate::leakage`]; the runner does this; default on). Off when the caller states
-    /// [`Config::near_field_m`].
+    /// Widen the near field to [`crate::leakage::LEAK_RANGE_M`] once the points show leakage
+    /// ([`crate::leakage`]; the runner does this; default on). A caller that states
+    /// [`Config::near_field_m`] turns this off (`milliego odometry --near-field` does), else a
+    /// stated range under 1 m is widened once leakage shows.
     pub near_field_from_data: bool,
     /// RNG seed (the estimate is deterministic for a seed and input).
     pub seed: u64,
