@@ -191,7 +191,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
     Ok(())
 }
 
-/// The near field's report: the range in use [m] and where it came from, with the leakage test's
+/// The near field's report: the range in use \[m\] and where it came from, with the leakage test's
 /// counts when it was left to the data.
 fn near_field_json(
     (range_m, learned): (f32, Option<(u32, u32, bool)>),
