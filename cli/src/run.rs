@@ -82,7 +82,8 @@ pub struct RunArgs {
     vehicle: bool,
     /// The IMU's noise preset for the filter: mti1 (Xsens MTi-1 series), mti600 (MTi-600
     /// series) or mems (BMI088/ICM class). Default: the one the session's IMU device names,
-    /// else mti1 (docs/odometry.md, "IMU noise").
+    /// else the MTi-1's noise with a gyro bias prior wide enough for any part (docs/odometry.md,
+    /// "IMU noise", "Gyro bias prior").
     #[arg(long, value_name = "PRESET")]
     imu_noise: Option<milliego_odometry::rio::ImuNoise>,
     /// Radar updates may correct heading (as `odometry --radar-heading`; docs/odometry.md).

@@ -336,6 +336,19 @@ fn every_command_works_on_an_imported_session() {
         m0.extrinsics, m1.extrinsics,
         "extrinsics through /tf_static"
     );
+    // The parts' names through the metadata: the IMU's picks the filter's noise preset.
+    let device = |m: &milliego_session::Meta| {
+        (
+            m.radar.as_ref().and_then(|r| r.device.clone()),
+            m.imu.as_ref().and_then(|i| i.device.clone()),
+        )
+    };
+    assert!(device(&m0).1.is_some());
+    assert_eq!(
+        device(&m0),
+        device(&m1),
+        "device names through the metadata"
+    );
     assert!(
         imp.join("radar.cfg").is_file(),
         "the .cfg through the metadata"

@@ -780,7 +780,19 @@ pub fn import(
     meta.description = opts.description.clone();
     meta.extrinsics.radar = calib.radar;
     meta.extrinsics.imu = calib.imu;
-    let device = |k: Kind| chosen.get(&k).map(|t| format!("imported from {}", t.topic));
+    // A device our export named (its `milliego` metadata), else the topic it came from.
+    let named = |k: Kind| match k {
+        Kind::Radar => ours.get("radar_device"),
+        Kind::Imu => ours.get("imu_device"),
+        _ => None,
+    };
+    let device = |k: Kind| {
+        chosen.get(&k).map(|t| {
+            named(k)
+                .cloned()
+                .unwrap_or_else(|| format!("imported from {}", t.topic))
+        })
+    };
     if chosen.contains_key(&Kind::Radar) {
         meta.radar = Some(RadarMeta {
             index: Some("radar.idx".into()),

@@ -547,6 +547,22 @@ pub fn export(
         // /radar/points are in the session's radar axes, not ROS's (milliego import reads this).
         ("radar_axes".into(), RADAR_AXES.into()),
     ]);
+    // The parts by name: the filter's IMU noise preset follows the IMU device's.
+    let devices = [
+        (
+            "radar_device",
+            session.meta.radar.as_ref().and_then(|r| r.device.clone()),
+        ),
+        (
+            "imu_device",
+            session.meta.imu.as_ref().and_then(|i| i.device.clone()),
+        ),
+    ];
+    for (key, device) in devices {
+        if let Some(d) = device {
+            ours.insert(key.into(), d);
+        }
+    }
     // The chirp configuration the radar ran: Doppler resolution and exposure for the estimators.
     if let Some(cfg) = session.radar_cfg()? {
         ours.insert("radar_cfg".into(), cfg);

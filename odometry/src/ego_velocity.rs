@@ -24,6 +24,13 @@ pub struct Detection {
     pub radial_velocity: f32,
 }
 
+impl Detection {
+    /// The position in the radar frame \[m\], in double precision.
+    pub fn position_m(&self) -> Vector3<f64> {
+        Vector3::from(self.position.map(f64::from))
+    }
+}
+
 /// Which velocity components to estimate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Model {
@@ -328,11 +335,7 @@ impl EgoVelocityEstimator {
         self.weight.clear();
         self.idx.clear();
         for (i, d) in detections.iter().enumerate() {
-            let p = Vector3::new(
-                f64::from(d.position[0]),
-                f64::from(d.position[1]),
-                f64::from(d.position[2]),
-            );
+            let p = d.position_m();
             let r = p.norm();
             if !(r.is_finite() && r >= f64::from(cfg.min_range) && d.radial_velocity.is_finite()) {
                 continue;

@@ -89,11 +89,7 @@ impl LeakageDetector {
             return false;
         }
         for d in detections {
-            let p = Vector3::new(
-                f64::from(d.position[0]),
-                f64::from(d.position[1]),
-                f64::from(d.position[2]),
-            );
+            let p = d.position_m();
             let r = p.norm();
             if !(r.is_finite()
                 && r >= min_range

@@ -70,11 +70,11 @@ pub fn imu_noise_of(session: &Session, asked: Option<ImuNoise>) -> (Option<ImuNo
         Some((d, Some(n))) => (Some(n), format!("{}, from the IMU device {d:?}", n.name())),
         Some((d, None)) => (
             None,
-            format!("the defaults (mti1): no preset for the IMU device {d:?}"),
+            format!("the defaults (MTi-1 noise, a gyro bias prior for any part): no preset for the IMU device {d:?}"),
         ),
         None => (
             None,
-            "the defaults (mti1): the session names no IMU device".into(),
+            "the defaults (MTi-1 noise, a gyro bias prior for any part): the session names no IMU device".into(),
         ),
     }
 }

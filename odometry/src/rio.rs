@@ -56,7 +56,8 @@ pub struct RioConfig {
     pub init_tilt_std: f64,
     /// Initial accelerometer bias standard deviation \[m/s^2\].
     pub init_accel_bias_std: f64,
-    /// Initial gyroscope bias standard deviation \[rad/s\].
+    /// Initial gyroscope bias standard deviation \[rad/s\] (the turn-on bias: 0.01 by default,
+    /// any MEMS part; [`XSENS_GYRO_TURN_ON_STD`] with an Xsens preset).
     pub init_gyro_bias_std: f64,
     /// Chi-square gate for radar updates (3 dof; 16.27 = 99.9%).
     pub gate: f64,
@@ -147,13 +148,23 @@ pub struct RioConfig {
     pub radar_error_time_s: f64,
 }
 
+/// The gyroscope turn-on bias deviation the Xsens presets ([`ImuNoise::Mti1`],
+/// [`ImuNoise::Mti600`]) start the filter from \[rad/s\] (0.086 deg/s): a factory-calibrated
+/// part's, where [`RioConfig::default`] keeps 0.01 rad/s for a part it knows nothing of. A prior
+/// that wide let the radar take a walk's levelling error as horizontal gyro bias, which a head
+/// that pitches turns into heading drift the radar may not correct (docs/odometry.md, "Gyro bias
+/// prior"). Chosen on the validation sets (0.001-0.003 within 3% of each other). A part whose
+/// bias is larger is still measured at a rest: the zero-rate update is not gated.
+pub const XSENS_GYRO_TURN_ON_STD: f64 = 1.5e-3;
+
 /// IMU noise presets for the filter's process noise, from the parts' datasheets (white noise
 /// densities inflated by 1.4 for the gyro, as the MTi-1 default is, for vibration and
-/// temperature; turn-on bias and random walks as docs/simulator.md assumes for each class).
+/// temperature; turn-on bias and random walks as docs/simulator.md assumes for each class; the
+/// Xsens classes' gyro turn-on bias [`XSENS_GYRO_TURN_ON_STD`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ImuNoise {
     /// Xsens MTi-1 series (MTi-1/2/3/7/8): gyro 0.007 deg/s/sqrt(Hz), accelerometer
-    /// 120 ug/sqrt(Hz). The default.
+    /// 120 ug/sqrt(Hz). The default's noise, with the gyro turn-on bias of a named Xsens part.
     Mti1,
     /// Xsens MTi-600 series (MTi-610/620/630/670/680): accelerometer 60 ug/sqrt(Hz), turn-on
     /// bias 30 mm/s^2.
@@ -239,6 +250,7 @@ impl RioConfig {
             self.accel_bias_walk,
             self.gyro_bias_walk,
             self.init_accel_bias_std,
+            self.init_gyro_bias_std,
         ) = match imu {
             ImuNoise::Mti1 => (
                 d.accel_noise,
@@ -246,6 +258,7 @@ impl RioConfig {
                 d.accel_bias_walk,
                 d.gyro_bias_walk,
                 d.init_accel_bias_std,
+                XSENS_GYRO_TURN_ON_STD,
             ),
             ImuNoise::Mti600 => (
                 0.6e-3,
@@ -253,15 +266,17 @@ impl RioConfig {
                 d.accel_bias_walk,
                 d.gyro_bias_walk,
                 0.03,
+                XSENS_GYRO_TURN_ON_STD,
             ),
-            ImuNoise::Mems => (1.72e-3, 3.4e-4, 5e-4, 1e-5, 0.1),
+            ImuNoise::Mems => (1.72e-3, 3.4e-4, 5e-4, 1e-5, 0.1, d.init_gyro_bias_std),
         };
         self
     }
 }
 
 impl Default for RioConfig {
-    /// MTi-1-class IMU (datasheet-level densities).
+    /// MTi-1-class IMU noise (datasheet-level densities), with a gyro turn-on bias prior wide
+    /// enough for a part the filter knows nothing of (0.01 rad/s; see [`XSENS_GYRO_TURN_ON_STD`]).
     fn default() -> Self {
         RioConfig {
             accel_noise: 1.2e-3,
@@ -1319,11 +1334,20 @@ mod tests {
         };
         assert_eq!(
             mine.with_imu_noise(ImuNoise::Mti1),
-            mine,
-            "MTi-1 is the default"
+            RioConfig {
+                init_gyro_bias_std: XSENS_GYRO_TURN_ON_STD,
+                ..mine
+            },
+            "MTi-1 is the default but for the gyro turn-on bias of a named part"
         );
+        assert_eq!(
+            mine.with_imu_noise(ImuNoise::Mti600).init_gyro_bias_std,
+            XSENS_GYRO_TURN_ON_STD
+        );
+        assert!(XSENS_GYRO_TURN_ON_STD < 0.2 * mine.init_gyro_bias_std);
         let mems = mine.with_imu_noise(ImuNoise::Mems);
         assert!(mems.gyro_noise > 1.9 * mine.gyro_noise && mems.init_accel_bias_std == 0.1);
+        assert_eq!(mems.init_gyro_bias_std, mine.init_gyro_bias_std);
         assert_eq!(
             (mems.gate, mems.baro_std_m),
             (9.0, 0.7),

@@ -293,6 +293,7 @@ pub struct Runner {
     dets: Vec<Detection>,
     // The Doppler step the frames' radial velocities show ([`EgoConfig::step_from_data`]).
     lattice: DopplerLattice,
+    // Whether the near field leaks ([`EgoConfig::near_field_from_data`]).
     leakage: LeakageDetector,
     // The step from the configuration, before the data's replaced it.
     configured_step: f32,
