@@ -131,11 +131,7 @@ fn with(
     m: &[RelativeMotion],
     learned: LearnedConfig,
 ) -> OfflineResult {
-    let cfg = OfflineConfig {
-        estimator: est,
-        ..OfflineConfig::default()
-    };
-    run_with_motions(s, &cfg, m, learned).expect("offline run")
+    with_imu(s, est, None, m, learned)
 }
 
 /// [`with`] for a filter told the IMU is a consumer MEMS part (its noise, and a gyro bias prior
@@ -146,9 +142,19 @@ fn with_mems(
     m: &[RelativeMotion],
     learned: LearnedConfig,
 ) -> OfflineResult {
+    with_imu(s, est, Some(ImuNoise::Mems), m, learned)
+}
+
+fn with_imu(
+    s: &Session,
+    est: Estimator,
+    imu_noise: Option<ImuNoise>,
+    m: &[RelativeMotion],
+    learned: LearnedConfig,
+) -> OfflineResult {
     let cfg = OfflineConfig {
         estimator: est,
-        imu_noise: Some(ImuNoise::Mems),
+        imu_noise,
         ..OfflineConfig::default()
     };
     run_with_motions(s, &cfg, m, learned).expect("offline run")
