@@ -101,6 +101,9 @@ fn run_online(dir: &Path, s: &Session, faults: &[&str]) -> Online {
         .arg("--radar-cfg")
         .arg(dir.join("radar.cfg"))
         .args(["--imu-baud", &imu_baud, "--estimator", "doppler"])
+        // Live devices name no IMU part: state the simulated one, whose preset (and gyro bias
+        // prior) the offline run takes from the session's device name.
+        .args(["--imu-noise", "mti1"])
         .arg("--config")
         .arg(config(dir, s))
         .args([
