@@ -59,6 +59,9 @@ pub struct OfflineConfig {
     pub imu_noise: Option<ImuNoise>,
 }
 
+/// How the reports name the filter's IMU settings when no preset applies.
+pub const DEFAULT_IMU_NOISE: &str = "the defaults (MTi-1 noise, a gyro bias prior for any part)";
+
 /// The IMU noise preset for `session` when `asked` is none ([`OfflineConfig::imu_noise`]), and
 /// where it came from (for the reports).
 pub fn imu_noise_of(session: &Session, asked: Option<ImuNoise>) -> (Option<ImuNoise>, String) {
@@ -70,11 +73,11 @@ pub fn imu_noise_of(session: &Session, asked: Option<ImuNoise>) -> (Option<ImuNo
         Some((d, Some(n))) => (Some(n), format!("{}, from the IMU device {d:?}", n.name())),
         Some((d, None)) => (
             None,
-            format!("the defaults (MTi-1 noise, a gyro bias prior for any part): no preset for the IMU device {d:?}"),
+            format!("{DEFAULT_IMU_NOISE}: no preset for the IMU device {d:?}"),
         ),
         None => (
             None,
-            "the defaults (MTi-1 noise, a gyro bias prior for any part): the session names no IMU device".into(),
+            format!("{DEFAULT_IMU_NOISE}: the session names no IMU device"),
         ),
     }
 }

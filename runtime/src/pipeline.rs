@@ -245,10 +245,10 @@ impl Plan {
         let mut radar_decoding = DecoderConfig::default();
         let mut imu_noise = match cfg.imu_noise {
             Some(n) => format!("{}, asked for", n.name()),
-            None => {
-                "the defaults (MTi-1 noise, a gyro bias prior for any part): live devices name none"
-                    .into()
-            }
+            None => format!(
+                "{}: live devices name none",
+                milliego_odometry::offline::DEFAULT_IMU_NOISE
+            ),
         };
         let mut apply_cfg = |cfg: &mut RunConfig, d: &radar_driver::cfg::Derived| {
             cfg.classical.ego = cfg
