@@ -86,6 +86,11 @@ pub struct RunArgs {
     /// "IMU noise", "Gyro bias prior").
     #[arg(long, value_name = "PRESET")]
     imu_noise: Option<milliego_odometry::rio::ImuNoise>,
+    /// Live devices: the IMU's part name (e.g. MTi-1, MTi-630, BMI088), which picks its noise
+    /// preset and gyro bias prior as a session's device name does; overrides `[imu] device` in
+    /// --config. Sessions name their own IMU.
+    #[arg(long, value_name = "NAME", conflicts_with = "session")]
+    imu_device: Option<String>,
     /// Radar updates may correct heading (as `odometry --radar-heading`; docs/odometry.md).
     #[arg(long)]
     radar_heading: bool,
@@ -325,6 +330,7 @@ pub fn run(a: RunArgs) -> Result<()> {
         cfg.classical.rio.nonholonomic_std = milliego_odometry::offline::GROUND_VEHICLE_STD;
     }
     cfg.imu_noise = a.imu_noise;
+    cfg.imu_device = a.imu_device.clone().or(file.imu.device.clone());
     cfg.classical.rio.radar_heading = a.radar_heading;
     if let Some(w) = a.persist_window {
         cfg.classical.persist.window_s = w.max(0.0);

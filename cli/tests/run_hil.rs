@@ -63,11 +63,15 @@ fn replay(dir: &Path, faults: &[&str]) -> (Child, String, String) {
 /// The session's extrinsics as a runtime config file.
 fn config(dir: &Path, s: &Session) -> std::path::PathBuf {
     let e = &s.meta.extrinsics;
+    // Live devices name no IMU part: the rig's configuration names the session's, whose preset
+    // (and gyro bias prior) the offline run takes from session.toml.
+    let device = s.meta.imu.as_ref().and_then(|i| i.device.clone()).unwrap();
     let p = dir.join("runtime.toml");
     std::fs::write(
         &p,
         format!(
-            "[extrinsics.radar]\nrotation_wxyz = {:?}\ntranslation_m = {:?}\n\
+            "[imu]\ndevice = {device:?}\n\
+             [extrinsics.radar]\nrotation_wxyz = {:?}\ntranslation_m = {:?}\n\
              [extrinsics.imu]\nrotation_wxyz = {:?}\ntranslation_m = {:?}\n",
             e.radar.rotation_wxyz, e.radar.translation_m, e.imu.rotation_wxyz, e.imu.translation_m
         ),
@@ -101,9 +105,6 @@ fn run_online(dir: &Path, s: &Session, faults: &[&str]) -> Online {
         .arg("--radar-cfg")
         .arg(dir.join("radar.cfg"))
         .args(["--imu-baud", &imu_baud, "--estimator", "doppler"])
-        // Live devices name no IMU part: state the simulated one, whose preset (and gyro bias
-        // prior) the offline run takes from the session's device name.
-        .args(["--imu-noise", "mti1"])
         .arg("--config")
         .arg(config(dir, s))
         .args([
@@ -224,6 +225,12 @@ fn replayed_session_streams_a_pose_per_radar_frame_as_good_as_offline() {
         let dt = (w[1].measurement_time_ns - w[0].measurement_time_ns) as f64 * 1e-9;
         assert!((0.03..0.07).contains(&dt), "radar-rate poses {dt} s apart");
     }
+    // The configuration's IMU part picked its preset, as the session's name does offline.
+    let noise = o.summary["imu_noise"].as_str().unwrap();
+    assert!(
+        noise.starts_with("mti1, from the IMU device"),
+        "live IMU noise: {noise}"
+    );
     let (n_off, ate_off) = offline_ate(d.path(), &s);
     assert!(
         radar_rate.len() + 1 >= n_off,

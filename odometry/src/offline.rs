@@ -65,20 +65,28 @@ pub const DEFAULT_IMU_NOISE: &str = "the defaults (MTi-1 noise, a gyro bias prio
 /// The IMU noise preset for `session` when `asked` is none ([`OfflineConfig::imu_noise`]), and
 /// where it came from (for the reports).
 pub fn imu_noise_of(session: &Session, asked: Option<ImuNoise>) -> (Option<ImuNoise>, String) {
+    let device = session.meta.imu.as_ref().and_then(|i| i.device.as_deref());
+    imu_noise_for(device, asked, "the session names no IMU device")
+}
+
+/// The IMU noise preset for an IMU named `device` (a session's, or a live rig's configuration)
+/// when `asked` is none, and where it came from (for the reports); `unnamed` says why no device
+/// name was given.
+pub fn imu_noise_for(
+    device: Option<&str>,
+    asked: Option<ImuNoise>,
+    unnamed: &str,
+) -> (Option<ImuNoise>, String) {
     if let Some(n) = asked {
         return (Some(n), format!("{}, asked for", n.name()));
     }
-    let device = session.meta.imu.as_ref().and_then(|i| i.device.as_deref());
     match device.map(|d| (d, ImuNoise::from_device(d))) {
         Some((d, Some(n))) => (Some(n), format!("{}, from the IMU device {d:?}", n.name())),
         Some((d, None)) => (
             None,
             format!("{DEFAULT_IMU_NOISE}: no preset for the IMU device {d:?}"),
         ),
-        None => (
-            None,
-            format!("{DEFAULT_IMU_NOISE}: the session names no IMU device"),
-        ),
+        None => (None, format!("{DEFAULT_IMU_NOISE}: {unnamed}")),
     }
 }
 

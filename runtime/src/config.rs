@@ -66,6 +66,9 @@ pub struct ImuSection {
     pub baud: Option<u32>,
     /// SampleTimeFine wrap: `pow32` (MTi-1/600) or `day` (MTi-10/100).
     pub wrap: Option<String>,
+    /// The part's name (e.g. `MTi-1`, `MTi-630`, `BMI088`): picks the filter's IMU noise preset
+    /// and gyro bias prior as a session's device name does (docs/odometry.md, "IMU noise").
+    pub device: Option<String>,
 }
 
 /// One sensor's placement.

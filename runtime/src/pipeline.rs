@@ -89,6 +89,11 @@ pub struct RunConfig {
     /// The IMU's noise preset for the filter; `None`: the one a session's IMU device names
     /// (`milliego_odometry::offline::imu_noise_of`), else `classical.rio` as given.
     pub imu_noise: Option<milliego_odometry::rio::ImuNoise>,
+    /// Live devices: the IMU's part name (`[imu] device` in the configuration file,
+    /// `run --imu-device`), whose preset the filter takes when `imu_noise` is none, as a
+    /// session's device name picks one (`milliego_odometry::rio::ImuNoise::from_device`).
+    /// Sessions name their own; this is not used for them.
+    pub imu_device: Option<String>,
     /// Queue capacities: radar frames, IMU samples, synchronised events, poses.
     pub queues: [usize; 4],
     /// Stop after this long \[s\].
@@ -119,6 +124,7 @@ impl Default for RunConfig {
             classical: ClassicalConfig::default(),
             sync: SyncConfig::default(),
             imu_noise: None,
+            imu_device: None,
             queues: [32, 512, 1024, 1024],
             duration_s: None,
             idle_exit_s: None,
@@ -243,13 +249,7 @@ impl Plan {
         let mut cfg = cfg.clone();
         let mut session = None;
         let mut radar_decoding = DecoderConfig::default();
-        let mut imu_noise = match cfg.imu_noise {
-            Some(n) => format!("{}, asked for", n.name()),
-            None => format!(
-                "{}: live devices name none",
-                milliego_odometry::offline::DEFAULT_IMU_NOISE
-            ),
-        };
+        let imu_noise;
         let mut apply_cfg = |cfg: &mut RunConfig, d: &radar_driver::cfg::Derived| {
             cfg.classical.ego = cfg
                 .classical
@@ -306,7 +306,13 @@ impl Plan {
                 if d.radar_data.is_none() && d.imu.is_none() && d.hub.is_none() {
                     return Err(RunError::NoSensor);
                 }
-                if let Some(n) = cfg.imu_noise {
+                let (noise, why) = milliego_odometry::offline::imu_noise_for(
+                    cfg.imu_device.as_deref(),
+                    cfg.imu_noise,
+                    "the live run names no IMU device (--imu-device, or [imu] device in --config)",
+                );
+                imu_noise = why;
+                if let Some(n) = noise {
                     cfg.classical.rio = cfg.classical.rio.with_imu_noise(n);
                 }
                 cfg.sync.radar_enabled = d.radar_data.is_some() || d.hub.is_some();
