@@ -245,7 +245,8 @@ struct Plan {
 }
 
 impl Plan {
-    fn derive(input: &Input, cfg: &RunConfig) -> Result<Plan, RunError> {
+    /// `imu_product`: the product code a live IMU answered while being configured.
+    fn derive(input: &Input, cfg: &RunConfig, imu_product: Option<&str>) -> Result<Plan, RunError> {
         let mut cfg = cfg.clone();
         let mut session = None;
         let mut radar_decoding = DecoderConfig::default();
@@ -306,10 +307,13 @@ impl Plan {
                 if d.radar_data.is_none() && d.imu.is_none() && d.hub.is_none() {
                     return Err(RunError::NoSensor);
                 }
+                // A name the user gave wins over the one the device answered (a part that
+                // misreports, a board that relabels it).
                 let (noise, why) = milliego_odometry::offline::imu_noise_for(
-                    cfg.imu_device.as_deref(),
+                    cfg.imu_device.as_deref().or(imu_product),
                     cfg.imu_noise,
-                    "the live run names no IMU device (--imu-device, or [imu] device in --config)",
+                    "the live run names no IMU device (--imu-device, or [imu] device in \
+                     --config; a configured Xsens names itself)",
                 );
                 imu_noise = why;
                 if let Some(n) = noise {
@@ -371,7 +375,14 @@ struct InputCounters {
 
 /// Runs the pipeline until the input ends, `stop` is set, or a limit is reached.
 pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summary, RunError> {
-    let plan = Plan::derive(input, cfg)?;
+    // Live devices open (and, configured, name themselves) first: an Xsens's product code picks
+    // the filter's IMU preset, as a session's device name does.
+    let mut opened = match input {
+        Input::Devices(d) => Some(open_devices(d)?),
+        Input::Session { .. } => None,
+    };
+    let imu_product = opened.as_ref().and_then(|o| o.imu_product.clone());
+    let plan = Plan::derive(input, cfg, imu_product.as_deref())?;
     let cfg = plan.cfg;
     let imu_noise = plan.imu_noise;
     let [qr, qi, qe, qp] = cfg.queues;
@@ -417,7 +428,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         session_radar_report = Some(report);
         input_threads.push(t);
     } else if let Input::Devices(d) = input {
-        let (radar, imu) = open_devices(d)?;
+        let OpenDevices { radar, imu, .. } = opened.take().expect("opened above");
         let backoff = Duration::from_secs_f64(cfg.reopen_backoff_s);
         if let Some(spec) = &d.hub {
             let wrap = if d.imu_wrap_day {
@@ -543,9 +554,17 @@ fn start_session(
 /// An open port and how to reopen it.
 type OpenPort = (Box<dyn Read + Send>, SerialSource);
 
+/// The live ports, open.
+struct OpenDevices {
+    radar: Option<OpenPort>,
+    imu: Option<OpenPort>,
+    /// The IMU's product code (`ReqProductCode`), asked while configuring it.
+    imu_product: Option<String>,
+}
+
 /// Opens (and, with `configure`, configures) the devices before any thread starts: a missing
-/// device stops the run here.
-fn open_devices(d: &Devices) -> Result<(Option<OpenPort>, Option<OpenPort>), RunError> {
+/// device stops the run here. A configured IMU is asked its product code on the way.
+fn open_devices(d: &Devices) -> Result<OpenDevices, RunError> {
     let mut radar_port = None;
     if let Some(p) = &d.radar_data {
         if d.configure {
@@ -582,6 +601,7 @@ fn open_devices(d: &Devices) -> Result<(Option<OpenPort>, Option<OpenPort>), Run
         radar_port = Some((port, src));
     }
     let mut imu_port = None;
+    let mut imu_product = None;
     if let Some(p) = &d.imu {
         let mut src = SerialSource {
             path: p.clone(),
@@ -593,6 +613,11 @@ fn open_devices(d: &Devices) -> Result<(Option<OpenPort>, Option<OpenPort>), Run
                 error,
             };
             let mut dev = imu_driver::host::Device::open(p, d.imu_baud).map_err(imu_err)?;
+            dev.go_to_config().map_err(imu_err)?;
+            let code = dev.product_code().map_err(imu_err)?;
+            let code = code.trim_matches(|c: char| c == '\0' || c.is_whitespace());
+            tracing::info!("IMU on {p}: product code {code:?}");
+            imu_product = Some(code.to_string());
             dev.go_to_measurement().map_err(imu_err)?;
             Box::new(dev.into_reader().into_inner())
         } else {
@@ -604,7 +629,11 @@ fn open_devices(d: &Devices) -> Result<(Option<OpenPort>, Option<OpenPort>), Run
         };
         imu_port = Some((port, src));
     }
-    Ok((radar_port, imu_port))
+    Ok(OpenDevices {
+        radar: radar_port,
+        imu: imu_port,
+        imu_product,
+    })
 }
 
 fn reader_ctx(sh: &Shared, stats: &Arc<ReaderStats>, backoff: Duration) -> ReaderCtx {

@@ -27,6 +27,8 @@ struct Script {
     silent: bool,
     /// Grants at most this rate [Hz] (other than "max").
     max_rate: u16,
+    /// Answers ReqProductCode with this (default: an MTi-G-710's).
+    product: Option<&'static str>,
 }
 
 struct FakeDevice {
@@ -56,6 +58,8 @@ impl FakeDevice {
         .unwrap();
         w.value(DataId(0x4020), &Value::Acceleration([0.0, 0.0, 9.81]))
             .unwrap();
+        w.value(DataId(0x8020), &Value::RateOfTurn([0.0, 0.0, 0.01]))
+            .unwrap();
         let n = w.finish(0xFF).unwrap();
         self.port.write_all(&buf[..n]).unwrap();
         self.counter = self.counter.wrapping_add(1);
@@ -77,7 +81,10 @@ impl FakeDevice {
                 self.send(mid::GO_TO_CONFIG_ACK, &[]);
             }
             mid::REQ_DID => self.send(mid::DEVICE_ID, &[0x03, 0x70, 0x12, 0x34]),
-            mid::REQ_PRODUCT_CODE => self.send(mid::PRODUCT_CODE, b"MTi-G-710-2A8G4   "),
+            mid::REQ_PRODUCT_CODE => {
+                let code = self.script.product.unwrap_or("MTi-G-710-2A8G4   ");
+                self.send(mid::PRODUCT_CODE, code.as_bytes());
+            }
             mid::REQ_FW_REV => self.send(mid::FIRMWARE_REV, &[1, 8, 2, 0, 0, 0, 7, 0, 0, 0, 9]),
             mid::SET_OUTPUT_CONFIGURATION => match self.script.reject_outputs {
                 Some(code) => self.send(mid::ERROR, &[code]),
@@ -142,6 +149,8 @@ struct Rig {
     device: Option<JoinHandle<Vec<u8>>>,
     _slave: TTYPort,
     port: Option<Box<dyn SerialPort>>,
+    /// The driver side's path.
+    path: String,
 }
 
 impl Rig {
@@ -167,6 +176,7 @@ impl Rig {
             device,
             _slave: slave,
             port: Some(port),
+            path,
         }
     }
 
@@ -348,4 +358,61 @@ fn baud_change_resets_and_answers_the_wake_up() {
             mid::GO_TO_MEASUREMENT
         ]
     );
+}
+
+/// `milliego run` on a live Xsens it configures: the product code the device answers picks the
+/// filter's IMU preset (as a session's device name does), and a name the user gives wins.
+#[test]
+fn a_live_run_names_the_imu_by_its_product_code() {
+    use milliego_runtime::estimator::EstimatorKind;
+    use milliego_runtime::pipeline::{run, Devices, Input, RunConfig};
+    let live = |product: &'static str, given: Option<&str>| {
+        let mut rig = Rig::new(Script {
+            product: Some(product),
+            max_rate: 400,
+            ..Script::default()
+        });
+        // The runtime opens the port by its path.
+        drop(rig.port.take());
+        let input = Input::Devices(Devices {
+            imu: Some(rig.path.clone()),
+            imu_baud: 115_200,
+            configure: true,
+            ..Devices::default()
+        });
+        let cfg = RunConfig {
+            estimator: EstimatorKind::Imu,
+            imu_device: given.map(String::from),
+            duration_s: Some(0.5),
+            ..RunConfig::default()
+        };
+        let summary = run(&input, &cfg, Arc::new(AtomicBool::new(false))).expect("live run");
+        let mids = rig.finish();
+        (summary.report, mids)
+    };
+    let (report, mids) = live("MTi-630-2A5G4       ", None);
+    assert_eq!(
+        mids,
+        [
+            mid::GO_TO_CONFIG,
+            mid::REQ_PRODUCT_CODE,
+            mid::GO_TO_MEASUREMENT
+        ],
+        "the run's requests"
+    );
+    assert_eq!(
+        report.imu_noise,
+        "mti600, from the IMU device \"MTi-630-2A5G4\""
+    );
+    assert!(
+        report.frames_in.imu > 0,
+        "no sample read after the configuration"
+    );
+    let (report, _) = live("MTi-3-8A7G6", None);
+    assert_eq!(
+        report.imu_noise,
+        "mti1, from the IMU device \"MTi-3-8A7G6\""
+    );
+    let (report, _) = live("MTi-630-2A5G4", Some("BMI088"));
+    assert_eq!(report.imu_noise, "mems, from the IMU device \"BMI088\"");
 }
