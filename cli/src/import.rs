@@ -57,6 +57,15 @@ pub struct ImportArgs {
     /// Import this much, in s (default: all).
     #[arg(long)]
     duration: Option<f64>,
+    /// The radar's part name for the session (e.g. IWR6843AOP); default: an export's own name,
+    /// else "imported from TOPIC".
+    #[arg(long, value_name = "NAME")]
+    radar_device: Option<String>,
+    /// The IMU's part name for the session (e.g. MTi-630, BMI088): picks the filter's IMU noise
+    /// preset and gyro bias prior in every later run (docs/odometry.md, "IMU noise"); default: an
+    /// export's own name, else "imported from TOPIC", which picks none.
+    #[arg(long, value_name = "NAME")]
+    imu_device: Option<String>,
 }
 
 pub fn run(a: ImportArgs) -> Result<()> {
@@ -97,6 +106,8 @@ pub fn run(a: ImportArgs) -> Result<()> {
         radar_cfg,
         start_s: a.start,
         duration_s: a.duration,
+        radar_device: a.radar_device,
+        imu_device: a.imu_device,
         description: format!(
             "imported from {}",
             a.sources

@@ -53,6 +53,13 @@ pub struct ImportOptions {
     /// estimators get its Doppler resolution and frame period; its active frame time is the
     /// exposure when the calibration gives none.
     pub radar_cfg: Option<String>,
+    /// The radar's and the IMU's part names for the session (`[radar] device`, `[imu] device`):
+    /// a recording names neither, and the IMU's name picks the filter's noise preset and gyro
+    /// bias prior (docs/odometry.md, "IMU noise"). `None`: the name in an export's `milliego`
+    /// metadata, else "imported from TOPIC".
+    pub radar_device: Option<String>,
+    /// See `radar_device`.
+    pub imu_device: Option<String>,
     /// Session description.
     pub description: String,
 }
@@ -780,10 +787,11 @@ pub fn import(
     meta.description = opts.description.clone();
     meta.extrinsics.radar = calib.radar;
     meta.extrinsics.imu = calib.imu;
-    // A device our export named (its `milliego` metadata), else the topic it came from.
+    // The name given, else a device our export named (its `milliego` metadata), else the topic
+    // it came from.
     let named = |k: Kind| match k {
-        Kind::Radar => ours.get("radar_device"),
-        Kind::Imu => ours.get("imu_device"),
+        Kind::Radar => opts.radar_device.as_ref().or(ours.get("radar_device")),
+        Kind::Imu | Kind::Pressure => opts.imu_device.as_ref().or(ours.get("imu_device")),
         _ => None,
     };
     let device = |k: Kind| {
