@@ -245,8 +245,7 @@ struct Plan {
 }
 
 impl Plan {
-    /// `imu_product`: the product code a live IMU answered while being configured.
-    fn derive(input: &Input, cfg: &RunConfig, imu_product: Option<&str>) -> Result<Plan, RunError> {
+    fn derive(input: &Input, cfg: &RunConfig) -> Result<Plan, RunError> {
         let mut cfg = cfg.clone();
         let mut session = None;
         let mut radar_decoding = DecoderConfig::default();
@@ -307,10 +306,9 @@ impl Plan {
                 if d.radar_data.is_none() && d.imu.is_none() && d.hub.is_none() {
                     return Err(RunError::NoSensor);
                 }
-                // A name the user gave wins over the one the device answered (a part that
-                // misreports, a board that relabels it).
+                // A configured Xsens names itself once its port is open ([`Plan::name_imu`]).
                 let (noise, why) = milliego_odometry::offline::imu_noise_for(
-                    cfg.imu_device.as_deref().or(imu_product),
+                    cfg.imu_device.as_deref(),
                     cfg.imu_noise,
                     "the live run names no IMU device (--imu-device, or [imu] device in \
                      --config; a configured Xsens names itself)",
@@ -328,11 +326,7 @@ impl Plan {
                 }
             }
         }
-        let model = cfg.model.as_deref().map(|path| ModelSource {
-            path,
-            threads: cfg.model_threads,
-        });
-        let built = build_run_estimators(cfg.estimator, &cfg.classical, model)?;
+        let built = Self::estimators(&cfg)?;
         if built.model_fallback {
             tracing::warn!("learned model unavailable: auto runs Doppler (MODEL_FALLBACK)");
         }
@@ -349,6 +343,32 @@ impl Plan {
             sinks,
             imu_noise,
         })
+    }
+
+    /// The run's estimators for `cfg`.
+    fn estimators(cfg: &RunConfig) -> Result<Built, RunError> {
+        let model = cfg.model.as_deref().map(|path| ModelSource {
+            path,
+            threads: cfg.model_threads,
+        });
+        Ok(build_run_estimators(cfg.estimator, &cfg.classical, model)?)
+    }
+
+    /// A live IMU that answered `product` (its product code) while being configured: the filter
+    /// takes that part's preset, as from a session's device name, unless the run named the part
+    /// or a preset itself (`asked`), which wins (a part that misreports, a board that relabels it).
+    fn name_imu(&mut self, asked: &RunConfig, product: &str) -> Result<(), RunError> {
+        if asked.imu_noise.is_some() || asked.imu_device.is_some() {
+            return Ok(());
+        }
+        let (noise, why) = milliego_odometry::offline::imu_noise_for(Some(product), None, "");
+        self.imu_noise = why;
+        if let Some(n) = noise {
+            // The plan took no preset for an unnamed part: this one applies to the defaults.
+            self.cfg.classical.rio = self.cfg.classical.rio.with_imu_noise(n);
+            self.built = Self::estimators(&self.cfg)?;
+        }
+        Ok(())
     }
 }
 
@@ -375,14 +395,18 @@ struct InputCounters {
 
 /// Runs the pipeline until the input ends, `stop` is set, or a limit is reached.
 pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summary, RunError> {
-    // Live devices open (and, configured, name themselves) first: an Xsens's product code picks
-    // the filter's IMU preset, as a session's device name does.
-    let mut opened = match input {
-        Input::Devices(d) => Some(open_devices(d)?),
-        Input::Session { .. } => None,
-    };
-    let imu_product = opened.as_ref().and_then(|o| o.imu_product.clone());
-    let plan = Plan::derive(input, cfg, imu_product.as_deref())?;
+    // The plan is checked before a device is touched (a bad model or setting stops the run here);
+    // then a live Xsens the run configures names itself, and its product code picks the filter's
+    // IMU preset, as a session's device name does.
+    let mut plan = Plan::derive(input, cfg)?;
+    let mut opened = None;
+    if let Input::Devices(d) = input {
+        let o = open_devices(d)?;
+        if let Some(code) = &o.imu_product {
+            plan.name_imu(cfg, code)?;
+        }
+        opened = Some(o);
+    }
     let cfg = plan.cfg;
     let imu_noise = plan.imu_noise;
     let [qr, qi, qe, qp] = cfg.queues;
