@@ -405,7 +405,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         if let Some(code) = &o.imu_product {
             plan.name_imu(cfg, code)?;
         }
-        opened = Some(o);
+        opened = Some((d, o));
     }
     let cfg = plan.cfg;
     let imu_noise = plan.imu_noise;
@@ -451,8 +451,7 @@ pub fn run(input: &Input, cfg: &RunConfig, stop: Arc<AtomicBool>) -> Result<Summ
         let (t, report) = start_session(&sh, &s, pace, cfg.session_online_clock, &counters)?;
         session_radar_report = Some(report);
         input_threads.push(t);
-    } else if let Input::Devices(d) = input {
-        let OpenDevices { radar, imu, .. } = opened.take().expect("opened above");
+    } else if let Some((d, OpenDevices { radar, imu, .. })) = opened.take() {
         let backoff = Duration::from_secs_f64(cfg.reopen_backoff_s);
         if let Some(spec) = &d.hub {
             let wrap = if d.imu_wrap_day {
