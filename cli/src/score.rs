@@ -10,7 +10,7 @@ use milliego_models::offline::run_session;
 use milliego_models::Model;
 use milliego_odometry::learned::LearnedConfig;
 use milliego_odometry::offline::{run as run_offline, Estimator, OfflineConfig};
-use milliego_odometry::runner::ClassicalConfig;
+use milliego_odometry::runner::{ClassicalConfig, RoundingRule};
 use milliego_runtime::estimator::EstimatorKind;
 use milliego_runtime::output::OutputSpec;
 use milliego_runtime::pipeline::{run as run_pipeline, Input, RunConfig};
@@ -74,6 +74,13 @@ pub struct ScoreArgs {
     /// Leave out the fused and auto rows (the model alone only).
     #[arg(long)]
     no_fused: bool,
+    /// Score only these rows, comma-separated: `imu` (dead reckoning), `model` (each model
+    /// alone), `zeroed` (each model with its radar input zeroed), `fused`, `auto`. Doppler RIO
+    /// is always scored: every row is compared with it. Default: all. Each model row runs the
+    /// network over every session, so tuning the fusion with `--rows auto` takes a quarter of
+    /// the time.
+    #[arg(long, value_delimiter = ',', value_name = "ROW,...")]
+    rows: Vec<String>,
     /// The learned measurements' absolute deviation per axis and keyframe interval \[m\]
     /// (default: the shipped setting, docs/model.md "Fusion").
     #[arg(long, value_name = "M")]
@@ -135,6 +142,11 @@ pub struct ScoreArgs {
     /// off; docs/odometry.md "The rounding a frame's points share is a state").
     #[arg(long, value_name = "SECONDS")]
     radar_error_time: Option<f64>,
+    /// Which rigs' ego-velocities take the likelihood of the rounded Doppler readings: never,
+    /// vehicles (the rigs declared ground vehicles) or always (default: the shipped setting;
+    /// docs/odometry.md "A slow robot under a coarse Doppler step").
+    #[arg(long, value_name = "never|vehicles|always")]
+    rounding: Option<String>,
     /// Let the radar updates correct the heading and the gyro bias about the vertical (default:
     /// off, the heading from the gyro; docs/odometry.md "Heading comes from the gyro").
     #[arg(long)]
@@ -245,9 +257,28 @@ pub(crate) fn stale(dir: &std::path::Path, found: &str, e: &milliego_sim::split:
     )
 }
 
+/// The rows `--rows` names, checked: `None` for all.
+fn chosen_rows(rows: &[String]) -> Result<Option<Vec<&'static str>>> {
+    const ROWS: [&str; 5] = ["imu", "model", "zeroed", "fused", "auto"];
+    if rows.is_empty() {
+        return Ok(None);
+    }
+    rows.iter()
+        .map(|r| {
+            let r = r.trim();
+            ROWS.iter().find(|k| **k == r).copied().ok_or_else(|| {
+                format!("--rows: {r:?} is none of imu, model, zeroed, fused, auto").into()
+            })
+        })
+        .collect::<Result<Vec<_>>>()
+        .map(Some)
+}
+
 pub fn run(a: ScoreArgs) -> Result<()> {
     let set: Set = a.set.parse()?;
     let version: SplitVersion = a.split.parse()?;
+    let rows = chosen_rows(&a.rows)?;
+    let wants = |row: &str| rows.as_ref().is_none_or(|r| r.contains(&row));
     // Checked before anything is simulated or run.
     declared_ground_vehicle(&a.ground_vehicles, MotionKind::Vehicle)?;
     let work = a
@@ -258,13 +289,14 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         .into_iter()
         .take(a.limit.unwrap_or(usize::MAX))
         .collect();
-    let mut estimators: Vec<(String, Column)> = vec![
-        (
+    let mut estimators: Vec<(String, Column)> = Vec::new();
+    if wants("imu") {
+        estimators.push((
             "IMU dead reckoning".into(),
             Column::Classical(Estimator::ImuOnly),
-        ),
-        (BASELINE.into(), Column::Classical(Estimator::Doppler)),
-    ];
+        ));
+    }
+    estimators.push((BASELINE.into(), Column::Classical(Estimator::Doppler)));
     let models = if a.no_model {
         Vec::new()
     } else if a.model.is_empty() {
@@ -290,19 +322,27 @@ pub fn run(a: ScoreArgs) -> Result<()> {
     for ((path, (m, _)), label) in models.iter().zip(loaded).zip(labels) {
         let name = format!("milliEgo {label}");
         let runtime = !a.no_fused;
-        // The same network with its radar input zeroed: what the radar adds to it.
-        let mut ablated = Model::load(path, Some(&milliego_preprocess::Config::default()))?;
-        ablated.set_radar_zeroed(true);
-        estimators.push((name.clone(), Column::Model(Box::new(m))));
-        estimators.push((
-            format!("{name}, radar zeroed"),
-            Column::Model(Box::new(ablated)),
-        ));
-        if runtime {
+        if wants("zeroed") {
+            // The same network with its radar input zeroed: what the radar adds to it.
+            let mut ablated = Model::load(path, Some(&milliego_preprocess::Config::default()))?;
+            ablated.set_radar_zeroed(true);
+            if wants("model") {
+                estimators.push((name.clone(), Column::Model(Box::new(m))));
+            }
+            estimators.push((
+                format!("{name}, radar zeroed"),
+                Column::Model(Box::new(ablated)),
+            ));
+        } else if wants("model") {
+            estimators.push((name.clone(), Column::Model(Box::new(m))));
+        }
+        if runtime && wants("fused") {
             estimators.push((
                 format!("fused ({label})"),
                 Column::Runtime(EstimatorKind::Fused, path.clone()),
             ));
+        }
+        if runtime && wants("auto") {
             estimators.push((
                 format!("auto ({label})"),
                 Column::Runtime(EstimatorKind::Auto, path.clone()),
@@ -369,6 +409,16 @@ pub fn run(a: ScoreArgs) -> Result<()> {
         classical.persist.window_s = w.max(0.0);
     }
     classical.rio.radar_heading |= a.radar_heading;
+    if let Some(r) = &a.rounding {
+        classical.rounding_likelihood = match r.as_str() {
+            "never" => RoundingRule::Never,
+            "vehicles" => RoundingRule::GroundVehicles,
+            "always" => RoundingRule::Always,
+            o => {
+                return Err(format!("--rounding: {o:?} is none of never, vehicles, always").into())
+            }
+        };
+    }
     if let Some(n) = a.radar_noise_window {
         classical.rio.radar_noise_window = n.max(0.0);
     }
@@ -409,6 +459,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
                         estimator: *est,
                         stack_window_s: classical.stack_window_s,
                         persist: classical.persist,
+                        rounding_likelihood: classical.rounding_likelihood,
                         ..OfflineConfig::default()
                     };
                     // The filter's settings as the runtime columns get them.
@@ -522,7 +573,7 @@ pub fn run(a: ScoreArgs) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use super::{sessions_worse, unique_labels};
+    use super::{chosen_rows, sessions_worse, unique_labels};
     use std::path::PathBuf;
 
     #[test]
@@ -560,6 +611,17 @@ mod tests {
                 "compact fp32",
             ]
         );
+    }
+
+    #[test]
+    fn rows_are_checked_by_name() {
+        assert_eq!(chosen_rows(&[]).unwrap(), None, "no --rows: every row");
+        let given = ["auto", " fused"].map(String::from);
+        assert_eq!(chosen_rows(&given).unwrap(), Some(vec!["auto", "fused"]));
+        let e = chosen_rows(&["doppler".to_string()])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("--rows: \"doppler\" is none of"), "{e}");
     }
 
     #[test]

@@ -139,3 +139,50 @@ fn score_refuses_a_learned_switch_that_is_neither_on_nor_off_by_name() {
         );
     }
 }
+
+#[test]
+fn score_rows_keeps_the_rows_asked_for_and_doppler() {
+    let work = tempfile::tempdir().unwrap();
+    let model = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../models/compact/model-int8.onnx"
+    );
+    let keys = |extra: &[&str]| -> Vec<String> {
+        let o = Command::new(env!("CARGO_BIN_EXE_milliego"))
+            .args(["score", "--set", "val", "--limit", "1", "--json"])
+            .arg("--work")
+            .arg(work.path())
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "score {extra:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+        let mut k: Vec<String> = v["estimators"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .cloned()
+            .collect();
+        k.sort();
+        k
+    };
+    // Without --rows every classical row; with it, Doppler RIO and the rows named.
+    assert_eq!(keys(&["--no-model"]), ["Doppler RIO", "IMU dead reckoning"]);
+    assert_eq!(keys(&["--no-model", "--rows", "auto"]), ["Doppler RIO"]);
+    assert_eq!(
+        keys(&["--model", model, "--rows", "auto,zeroed"]),
+        [
+            "Doppler RIO",
+            "auto (compact int8)",
+            "milliEgo compact int8, radar zeroed"
+        ]
+    );
+    let bad = score_two(work.path(), &["--rows", "auto,doppler"]);
+    assert!(!bad.status.success(), "--rows doppler was taken");
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("--rows: \"doppler\""), "{err}");
+}

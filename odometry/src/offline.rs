@@ -54,6 +54,9 @@ pub struct OfflineConfig {
     pub stack_window_s: f64,
     /// Consensus weights from point persistence ([`ClassicalConfig::persist`]).
     pub persist: crate::persist::PersistConfig,
+    /// Which rigs take the likelihood of the rounded Doppler readings
+    /// ([`ClassicalConfig::rounding_likelihood`]).
+    pub rounding_likelihood: crate::runner::RoundingRule,
     /// The IMU's noise preset ([`RioConfig::with_imu_noise`]); `None`: the one the session's IMU
     /// device names ([`ImuNoise::from_device`]), or `rio` as given when it names none.
     pub imu_noise: Option<ImuNoise>,
@@ -155,6 +158,7 @@ impl Default for OfflineConfig {
             time_offset: TimeOffsetMode::Auto,
             stack_window_s: c.stack_window_s,
             persist: c.persist,
+            rounding_likelihood: c.rounding_likelihood,
             imu_noise: None,
         }
     }
@@ -343,6 +347,7 @@ pub fn run_with_motions(
             learned,
             stack_window_s: cfg.stack_window_s,
             persist: cfg.persist,
+            rounding_likelihood: cfg.rounding_likelihood,
         },
         cfg.estimator == Estimator::Doppler,
     );

@@ -164,6 +164,37 @@ pub struct ClassicalConfig {
     /// Points seen again weigh more in the ego-velocity consensus than points seen once
     /// ([`crate::persist`]).
     pub persist: PersistConfig,
+    /// Which rigs' ego-velocities take the likelihood of the rounded Doppler readings
+    /// ([`EgoConfig::rounding_likelihood`]); a stated `ego.rounding_likelihood` turns it on for
+    /// every rig.
+    pub rounding_likelihood: RoundingRule,
+}
+
+/// Which rigs' ego-velocities take the likelihood of the rounded Doppler readings
+/// ([`EgoConfig::rounding_likelihood`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RoundingRule {
+    /// None: least squares on the readings (the default: docs/odometry.md, "A slow robot under a
+    /// coarse Doppler step").
+    #[default]
+    Never,
+    /// Ground vehicles ([`crate::rio::RioConfig::nonholonomic_std`] finite): their velocity lies
+    /// along the body, and a slow one under a coarse step is where least squares fails.
+    GroundVehicles,
+    /// Every rig.
+    Always,
+}
+
+impl RoundingRule {
+    /// Whether a rig with `cfg` takes the likelihood.
+    pub fn applies(self, cfg: &ClassicalConfig) -> bool {
+        cfg.ego.rounding_likelihood
+            || match self {
+                RoundingRule::Never => false,
+                RoundingRule::GroundVehicles => cfg.rio.nonholonomic_std.is_finite(),
+                RoundingRule::Always => true,
+            }
+    }
 }
 
 impl Default for ClassicalConfig {
@@ -179,6 +210,7 @@ impl Default for ClassicalConfig {
             learned: LearnedConfig::default(),
             stack_window_s: 0.0,
             persist: PersistConfig::default(),
+            rounding_likelihood: RoundingRule::default(),
         }
     }
 }
@@ -342,6 +374,9 @@ impl Runner {
             rotation: q_bi.inverse() * q_br,
             translation: q_bi.inverse() * (t_br - t_bi),
         };
+        let mut cfg = *cfg;
+        cfg.ego.rounding_likelihood = cfg.rounding_likelihood.applies(&cfg);
+        let cfg = &cfg;
         Runner {
             cfg: *cfg,
             use_radar,

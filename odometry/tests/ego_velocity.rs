@@ -411,3 +411,57 @@ fn the_rounding_a_coarse_step_shares_is_reported_apart_and_not_counted_twice() {
     assert!(fine.is_ok());
     assert_eq!(fine.shared_covariance, [[0.0; 3]; 3]);
 }
+
+#[test]
+fn the_rounding_likelihood_reads_a_slow_robot_closer_and_knows_its_uncertainty() {
+    // A robot at 0.2-0.45 m/s under 0.26 m/s steps with 0.04 m/s noise: each static point reads
+    // 0 or one step. Least squares takes the readings as radial velocities; the likelihood of
+    // the rounded readings knows which radial velocities round to them.
+    let step = 0.26f32;
+    let mut rng = ChaCha8Rng::seed_from_u64(21);
+    let coarse = cfg().with_velocity_resolution(f64::from(step));
+    let mut ls = EgoVelocityEstimator::new(coarse);
+    let mut ml = EgoVelocityEstimator::new(Config {
+        rounding_likelihood: true,
+        ..coarse
+    });
+    let (mut ls_sq, mut ml_sq, mut ml_nees, mut n) = (0.0, 0.0, 0.0, 0);
+    for _ in 0..300 {
+        let speed = rng.gen_range(0.2..0.45);
+        let v = [0.0, speed, 0.0];
+        let (mut dets, _) = frame(&mut rng, v, 60, 0.0, 20.0);
+        for d in dets.iter_mut() {
+            d.radial_velocity = (d.radial_velocity / step).round() * step;
+        }
+        let (a, b) = (ls.estimate(&dets), ml.estimate(&dets));
+        if a.is_ok() && b.is_ok() {
+            // Forward speed errors.
+            ls_sq += (f64::from(a.velocity[1]) - speed).powi(2);
+            ml_sq += (f64::from(b.velocity[1]) - speed).powi(2);
+            ml_nees += nees(&b, v);
+            n += 1;
+        }
+    }
+    assert!(n > 250, "{n} of 300 frames gave both velocities");
+    let (ls_rms, ml_rms) = ((ls_sq / f64::from(n)).sqrt(), (ml_sq / f64::from(n)).sqrt());
+    assert!(
+        ml_rms < 0.6 * ls_rms,
+        "forward speed error {ml_rms:.3} m/s rms against least squares' {ls_rms:.3}"
+    );
+    let mean_nees = ml_nees / f64::from(n);
+    // Its covariance covers its error (the larger of the likelihood's and the least squares').
+    assert!(
+        mean_nees < 6.0,
+        "likelihood's mean NEES {mean_nees} (3 is consistent, below is cautious)"
+    );
+    // Continuous Doppler (nothing rounded): the least squares as it is.
+    let (dets, _) = frame(&mut rng, [0.3, 1.0, 0.0], 30, 0.0, 20.0);
+    assert_eq!(
+        EgoVelocityEstimator::new(Config {
+            rounding_likelihood: true,
+            ..cfg()
+        })
+        .estimate(&dets),
+        EgoVelocityEstimator::new(cfg()).estimate(&dets)
+    );
+}

@@ -430,3 +430,24 @@ fn both_orders_agree_when_several_frames_fall_in_one_imu_interval() {
         );
     }
 }
+
+#[test]
+fn the_rounding_likelihood_goes_to_the_rigs_its_rule_names() {
+    use milliego_odometry::runner::RoundingRule;
+    let walk = ClassicalConfig::default();
+    let mut car = ClassicalConfig::default();
+    car.rio.nonholonomic_std = milliego_odometry::offline::GROUND_VEHICLE_STD;
+    assert_eq!(walk.rounding_likelihood, RoundingRule::Never, "the default");
+    for (rule, walk_too, car_too) in [
+        (RoundingRule::Never, false, false),
+        (RoundingRule::GroundVehicles, false, true),
+        (RoundingRule::Always, true, true),
+    ] {
+        assert_eq!(rule.applies(&walk), walk_too, "{rule:?}, a walk");
+        assert_eq!(rule.applies(&car), car_too, "{rule:?}, a car");
+    }
+    // Stated on the ego-velocity settings, it holds for every rig.
+    let mut stated = walk;
+    stated.ego.rounding_likelihood = true;
+    assert!(RoundingRule::Never.applies(&stated));
+}
