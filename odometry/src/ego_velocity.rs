@@ -763,11 +763,7 @@ fn rounded_likelihood(
             info += d * d.transpose() * fisher;
         }
         if model == Model::Planar {
-            info[(2, 2)] = 1.0;
-            info[(0, 2)] = 0.0;
-            info[(2, 0)] = 0.0;
-            info[(1, 2)] = 0.0;
-            info[(2, 1)] = 0.0;
+            z_apart(&mut info);
             score.z = 0.0;
         }
         let cov = info.try_inverse()?;
@@ -790,6 +786,15 @@ fn rounded_likelihood(
         }
     }
     None
+}
+
+/// Sets `m`'s z row and column apart from x-y, with 1 on the diagonal ([`Model::Planar`]).
+fn z_apart(m: &mut Matrix3<f64>) {
+    m[(2, 2)] = 1.0;
+    m[(0, 2)] = 0.0;
+    m[(2, 0)] = 0.0;
+    m[(1, 2)] = 0.0;
+    m[(2, 1)] = 0.0;
 }
 
 /// Least squares for `v` in `vr_i = -d_i . v` over the given points.
@@ -851,12 +856,8 @@ fn weakest_direction(dirs: &[Vector3<f64>], model: Model) -> Option<(Vector3<f64
     }
     s /= n;
     if model == Model::Planar {
-        // Only x-y matters: put a large value on z so it is never the weakest.
-        s[(2, 2)] = 1.0;
-        s[(0, 2)] = 0.0;
-        s[(2, 0)] = 0.0;
-        s[(1, 2)] = 0.0;
-        s[(2, 1)] = 0.0;
+        // Only x-y matters: z apart with a large value, so it is never the weakest.
+        z_apart(&mut s);
     }
     let e = SymmetricEigen::new(s);
     let (k, val) =
