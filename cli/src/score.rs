@@ -322,19 +322,17 @@ pub fn run(a: ScoreArgs) -> Result<()> {
     for ((path, (m, _)), label) in models.iter().zip(loaded).zip(labels) {
         let name = format!("milliEgo {label}");
         let runtime = !a.no_fused;
+        if wants("model") {
+            estimators.push((name.clone(), Column::Model(Box::new(m))));
+        }
         if wants("zeroed") {
             // The same network with its radar input zeroed: what the radar adds to it.
             let mut ablated = Model::load(path, Some(&milliego_preprocess::Config::default()))?;
             ablated.set_radar_zeroed(true);
-            if wants("model") {
-                estimators.push((name.clone(), Column::Model(Box::new(m))));
-            }
             estimators.push((
                 format!("{name}, radar zeroed"),
                 Column::Model(Box::new(ablated)),
             ));
-        } else if wants("model") {
-            estimators.push((name.clone(), Column::Model(Box::new(m))));
         }
         if runtime && wants("fused") {
             estimators.push((
@@ -410,14 +408,9 @@ pub fn run(a: ScoreArgs) -> Result<()> {
     }
     classical.rio.radar_heading |= a.radar_heading;
     if let Some(r) = &a.rounding {
-        classical.rounding_likelihood = match r.as_str() {
-            "never" => RoundingRule::Never,
-            "vehicles" => RoundingRule::GroundVehicles,
-            "always" => RoundingRule::Always,
-            o => {
-                return Err(format!("--rounding: {o:?} is none of never, vehicles, always").into())
-            }
-        };
+        classical.rounding_likelihood = r
+            .parse::<RoundingRule>()
+            .map_err(|e| format!("--rounding: {e}"))?;
     }
     if let Some(n) = a.radar_noise_window {
         classical.rio.radar_noise_window = n.max(0.0);

@@ -576,54 +576,32 @@ impl EgoVelocityEstimator {
         if cfg.model == Model::Planar {
             dtd[(2, 2)] = 1.0;
         }
-        // The likelihood's noise: the Doppler noise alone (direction errors dither the rounding
-        // less than their covariance term says: measured, docs/odometry.md).
-        let noise = f64::from(cfg.sigma.max(0.0));
-        if cfg.rounding_likelihood
-            && quantisation_correlation(step, noise) > ROUNDING_TIED_MIN
-            && noise > 0.0
-        {
-            if let Some((v_ml, cov_ml)) =
-                rounded_likelihood(&self.dirs, &self.vr, v, step, noise, cfg.model)
-            {
-                // The direction errors at this speed, as for the least squares.
-                let dir_var = (v_ml.norm() * sd).powi(2);
-                let dtd_inv = dtd.try_inverse().unwrap_or_else(Matrix3::zeros);
-                // The likelihood's covariance knows the rounding and the Doppler noise; the
-                // least squares' counts the direction errors too: the larger of the two, with
-                // its part the frame's points share.
-                let ls_shared = dtd_inv * (tied * step * step / 12.0 * inl.len() as f64);
-                let ls_cov = dtd_inv * (sigma * sigma) + ls_shared;
-                let ml_cov = cov_ml + dtd_inv * dir_var;
-                let (cov, shared) = if ml_cov.trace() > ls_cov.trace() {
-                    (ml_cov, cov_ml)
-                } else {
-                    (ls_cov, ls_shared)
-                };
-                est.velocity = [v_ml.x as f32, v_ml.y as f32, v_ml.z as f32];
-                for r in 0..3 {
-                    for c in 0..3 {
-                        let planar_z = cfg.model == Model::Planar && (r == 2 || c == 2);
-                        est.covariance[r][c] = if planar_z { 0.0 } else { cov[(r, c)] as f32 };
-                        est.shared_covariance[r][c] =
-                            if planar_z { 0.0 } else { shared[(r, c)] as f32 };
-                    }
-                }
-                est.inliers = inl.len();
-                est.residual_rms = rms as f32;
-                for &i in &inl {
-                    est.inlier_mask[self.idx[i]] = true;
-                }
-                self.inl = inl;
-                return;
-            }
-        }
         // Rounding the points' noise cannot dither is nearly the same function of the velocity
         // for every point of the frame: that share does not shrink with the point count.
         let shared = tied * step * step / 12.0 * inl.len() as f64;
         let dtd_inv = dtd.try_inverse().unwrap_or_else(Matrix3::zeros);
-        let cov = dtd_inv * (sigma * sigma + shared);
-        let cov_shared = dtd_inv * shared;
+        let mut cov = dtd_inv * (sigma * sigma + shared);
+        let mut cov_shared = dtd_inv * shared;
+        // The likelihood's noise: the Doppler noise alone (direction errors dither the rounding
+        // less than their covariance term says: measured, docs/odometry.md).
+        let noise = f64::from(cfg.sigma.max(0.0));
+        if cfg.rounding_likelihood
+            && noise > 0.0
+            && quantisation_correlation(step, noise) > ROUNDING_TIED_MIN
+        {
+            if let Some((v_ml, cov_ml)) =
+                rounded_likelihood(&self.dirs, &self.vr, v, step, noise, cfg.model)
+            {
+                // The likelihood's covariance knows the rounding and the Doppler noise; the
+                // least squares' counts the direction errors too: the larger of the two, with
+                // its part the frame's points share.
+                let ml_cov = cov_ml + dtd_inv * (v_ml.norm() * sd).powi(2);
+                if ml_cov.trace() > cov.trace() {
+                    (cov, cov_shared) = (ml_cov, cov_ml);
+                }
+                v = v_ml;
+            }
+        }
         est.velocity = [v.x as f32, v.y as f32, v.z as f32];
         for r in 0..3 {
             for c in 0..3 {

@@ -185,6 +185,20 @@ pub enum RoundingRule {
     Always,
 }
 
+impl core::str::FromStr for RoundingRule {
+    type Err = String;
+
+    /// `never`, `vehicles` or `always`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "never" => Ok(RoundingRule::Never),
+            "vehicles" => Ok(RoundingRule::GroundVehicles),
+            "always" => Ok(RoundingRule::Always),
+            o => Err(format!("{o:?} is none of never, vehicles, always")),
+        }
+    }
+}
+
 impl RoundingRule {
     /// Whether a rig with `cfg` takes the likelihood.
     pub fn applies(self, cfg: &ClassicalConfig) -> bool {

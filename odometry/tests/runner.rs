@@ -446,6 +446,14 @@ fn the_rounding_likelihood_goes_to_the_rigs_its_rule_names() {
         assert_eq!(rule.applies(&walk), walk_too, "{rule:?}, a walk");
         assert_eq!(rule.applies(&car), car_too, "{rule:?}, a car");
     }
+    // By name, as `score --rounding` takes it.
+    assert_eq!("vehicles".parse(), Ok(RoundingRule::GroundVehicles));
+    assert_eq!("never".parse(), Ok(RoundingRule::Never));
+    assert_eq!("always".parse(), Ok(RoundingRule::Always));
+    assert!("sometimes"
+        .parse::<RoundingRule>()
+        .unwrap_err()
+        .contains("\"sometimes\""));
     // Stated on the ego-velocity settings, it holds for every rig.
     let mut stated = walk;
     stated.ego.rounding_likelihood = true;
