@@ -3,6 +3,7 @@
 
 use clap::{Args, ValueEnum};
 use milliego_odometry::offline::{run as run_offline, Estimator, OfflineConfig, TimeOffsetMode};
+use milliego_odometry::runner::UNAIDED_AFTER_S;
 use milliego_session::{write_tum, Session};
 use serde_json::json;
 use std::path::PathBuf;
@@ -173,6 +174,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
             "poses": r.trajectory.len(), "radar_frames": r.radar_frames, "imu_samples": r.imu_samples,
             "ego_velocity": {"ok": r.ego_ok, "degenerate": r.ego_degenerate, "too_few_points": r.ego_too_few, "no_consensus": r.ego_no_consensus, "stacked": r.ego_stacked},
             "points_seen_again": {"frames": r.persist.frames, "seen_again": r.persist.seen_again, "fresh": r.persist.fresh},
+            "unaided": {"longest_s": r.unaided.length_s, "from_s": r.unaided.from_s, "poses_over_s": UNAIDED_AFTER_S, "poses": r.unaided.poses_unaided},
             "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "rest_refuted": r.rest_refuted, "vertical_bounds": r.vertical_bounds, "horizontal_bounds": r.horizontal_bounds, "nis_mean": r.nis_mean, "radar_noise_scale": r.radar_noise_scale},
             "barometer": if r.pressure_readings == 0 { json!("none in the session: height from radar and IMU only") } else if a.no_barometer { json!(format!("{} readings ignored (--no-barometer)", r.pressure_readings)) } else { json!({"readings": r.pressure_readings, "updates": r.baro_updates, "rejected": r.baro_rejected, "reanchors": r.baro_reanchors}) },
             "doppler_step": doppler_step_json(r.doppler_step, a.doppler_step.is_some()),

@@ -59,7 +59,7 @@ pub const HEALTH_SCHEMA: &str = r#"{
     "active_estimator": {"type": "string", "description": "The latest pose's estimator code: model, doppler, imu"},
     "input": {"type": "string", "description": "session or devices"},
     "flags": {"type": "array", "items": {"type": "string"},
-              "description": "The latest pose's health flags: radar_missing, imu_missing, model_fallback, clock_unsynced, frames_dropped, predicted, reset, handover"},
+              "description": "The latest pose's health flags: radar_missing, imu_missing, model_fallback, clock_unsynced, frames_dropped, predicted, reset, handover, dead_reckoning"},
     "health_bits": {"type": "integer"},
     "clock": {"type": "object", "properties": {"mode": {"type": "string", "description": "session fit or online"},
                                                "synced": {"type": "boolean"}}},
@@ -137,6 +137,7 @@ fn flag_names(h: Health) -> Vec<&'static str> {
         (Health::PREDICTED, "predicted"),
         (Health::RESET, "reset"),
         (Health::HANDOVER, "handover"),
+        (Health::DEAD_RECKONING, "dead_reckoning"),
     ]
     .into_iter()
     .filter(|(f, _)| h.contains(*f))

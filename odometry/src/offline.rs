@@ -198,6 +198,11 @@ pub struct OfflineResult {
     pub rest_refuted: u64,
     /// Zero-velocity and zero-rate updates applied at rest.
     pub rest_updates: u64,
+    /// The longest stretch the poses rested on the IMU alone (no radar velocity, rest or
+    /// learned measurement; times on the host clock, as the trajectory's), and the poses given
+    /// more than [`crate::runner::UNAIDED_AFTER_S`] after an aid
+    /// ([`crate::runner::FramePose::unaided_s`]).
+    pub unaided: crate::runner::UnaidedStretch,
     /// Vertical velocity bounds applied ([`RioConfig::vertical_velocity_std`]).
     pub vertical_bounds: u64,
     /// Horizontal velocity bounds applied ([`RioConfig::horizontal_velocity_std`]).
@@ -423,6 +428,7 @@ pub fn run_with_motions(
         rest_samples: c.rest_samples,
         rest_refuted: c.rest_refuted,
         rest_updates: filter.rest_updates,
+        unaided: runner.longest_unaided(),
         vertical_bounds: filter.vertical_bounds,
         horizontal_bounds: filter.horizontal_bounds,
         nis_mean: runner.filter().and_then(|f| f.nis_mean()),

@@ -66,6 +66,13 @@ pub const ANCHOR_CAPACITY: usize = 64;
 /// Frames kept for stacking at most ([`ClassicalConfig::stack_window_s`]).
 pub const STACK_FRAMES: usize = 16;
 
+/// How long a pose may rest on the IMU alone before it is called unaided \[s\]
+/// ([`FramePose::unaided_s`]; the runtime's `dead_reckoning` health flag): no radar velocity, rest
+/// or learned measurement was applied for longer than this. One second: about 20 radar frames,
+/// after which an MTi-1-class IMU's velocity error alone (tilt and bias, no aid) grows past
+/// walking-pace precision (0.05 m/s), and a sparse scene has shown it cannot give a velocity.
+pub const UNAIDED_AFTER_S: f64 = 1.0;
+
 /// Points kept for stacking at most (older frames give way).
 pub const STACK_POINTS: usize = 1024;
 
@@ -251,6 +258,22 @@ pub struct FramePose {
     pub body: Isometry3<f64>,
     /// Body velocity in the world frame \[m/s\].
     pub velocity_world: Vector3<f64>,
+    /// How long the pose has rested on the IMU alone \[s\]: the time since the filter last
+    /// applied a velocity from the radar, a rest (zero-velocity update) or the learned model
+    /// (since it started, before the first). Position error grows with it: past
+    /// [`UNAIDED_AFTER_S`] the pose is dead-reckoned ([`Runner::longest_unaided`]).
+    pub unaided_s: f64,
+}
+
+/// The longest stretch a run's poses rested on the IMU alone ([`FramePose::unaided_s`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct UnaidedStretch {
+    /// When it began (the last aid before it, or the filter's start) \[s\].
+    pub from_s: f64,
+    /// How long it lasted, up to the last pose in it \[s\].
+    pub length_s: f64,
+    /// Poses given more than [`UNAIDED_AFTER_S`] after an aid, over the whole run.
+    pub poses_unaided: u64,
 }
 
 /// What the runner did with its inputs.
@@ -373,6 +396,14 @@ pub struct Runner {
     calibration: Calibration,
     // Recent frames' points in the world frame, for the consensus weights.
     history: PointHistory,
+    // Aids applied so far (radar velocities, rest updates, learned measurements; counted over
+    // every filter, as the filter's own counters restart with it), as last seen at a pose.
+    aids_seen: u64,
+    // Aids applied by filters before the current one (an IMU gap restarts the filter).
+    aids_before: u64,
+    // When the last aid was seen (at a pose), or the filter started.
+    aided_at: Option<f64>,
+    unaided: UnaidedStretch,
 }
 
 impl Runner {
@@ -433,7 +464,52 @@ impl Runner {
             learned: LearnedCounters::default(),
             calibration: Calibration::default(),
             history: PointHistory::new(cfg.persist),
+            aids_seen: 0,
+            aids_before: 0,
+            aided_at: None,
+            unaided: UnaidedStretch::default(),
         }
+    }
+
+    /// The longest stretch the poses so far rested on the IMU alone, and how many poses were
+    /// unaided ([`FramePose::unaided_s`]).
+    pub fn longest_unaided(&self) -> UnaidedStretch {
+        self.unaided
+    }
+
+    /// When the filter last took a velocity aid (a radar velocity, a rest update or a learned
+    /// measurement) as seen at the latest pose, or when its first pose was given \[s\]; None
+    /// before the first pose. A pose at `t` has rested on the IMU alone for `t - last_aid_s`.
+    pub fn last_aid_s(&self) -> Option<f64> {
+        self.aided_at
+    }
+
+    /// Velocity aids applied so far: radar velocities, rest updates (over every filter of the
+    /// run) and learned measurements, and radar velocities that carried a gap in the IMU.
+    fn aids(&self) -> u64 {
+        let now = self
+            .rio
+            .as_ref()
+            .map_or(0, |r| r.counters().updates + r.counters().rest_updates);
+        self.aids_before + now + self.learned.applied
+    }
+
+    /// The time since the last aid at a pose at `t` \[s\] ([`FramePose::unaided_s`]), noting a
+    /// new aid and the longest stretch.
+    fn unaided_at(&mut self, t: f64) -> f64 {
+        let aids = self.aids();
+        if aids != self.aids_seen {
+            self.aids_seen = aids;
+            self.aided_at = Some(t);
+        }
+        let from = *self.aided_at.get_or_insert(t);
+        let since = (t - from).max(0.0);
+        if since > self.unaided.length_s {
+            self.unaided.from_s = from;
+            self.unaided.length_s = since;
+        }
+        self.unaided.poses_unaided += u64::from(since > UNAIDED_AFTER_S);
+        since
     }
 
     /// What the persistence weighting did ([`crate::persist`]).
@@ -513,6 +589,10 @@ impl Runner {
             // dead-reckoned state (tilt and biases re-learned, the pose kept).
             let st = NavState { t: s.t, ..d };
             self.count_behind();
+            self.aids_before += self
+                .rio
+                .as_ref()
+                .map_or(0, |r| r.counters().updates + r.counters().rest_updates);
             self.rio = Some(self.filter_from(Rio::new(self.cfg.rio, self.mount, st)));
             self.counters.imu_restarts += 1;
             self.clear_stack();
@@ -787,11 +867,13 @@ impl Runner {
             }
             let updates = self.rio.as_ref().map_or(0, |r| r.counters().updates);
             self.anchors.push_back((t, body, updates));
+            let unaided_s = self.unaided_at(t);
             self.out.push_back(FramePose {
                 id,
                 t,
                 body,
                 velocity_world,
+                unaided_s,
             });
         }
     }
@@ -1244,6 +1326,7 @@ impl Runner {
             let m = self.measure(t, &dets, None, None);
             self.dets = dets;
             if let Some(m) = m {
+                self.aids_before += 1;
                 // The radar's own velocity in its frame (lever arm neglected without gyro).
                 let v_i = self.mount.rotation * Vector3::from(m.velocity);
                 st.v = st.q * v_i;

@@ -8,7 +8,7 @@
 use milliego_odometry::rio::RioCounters;
 use milliego_odometry::runner::{
     guided, ClassicalConfig, FrameInput, FramePose, Mounting, Runner, GUIDE_AFTER_UPDATES,
-    MAX_REJECTED_IN_ROW,
+    MAX_REJECTED_IN_ROW, UNAIDED_AFTER_S,
 };
 use milliego_odometry::strapdown::{ImuSample, STANDARD_GRAVITY};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -258,7 +258,7 @@ fn sparse_turning_walk(
     stack_window_s: f64,
     per_frame: usize,
     sigma: f32,
-) -> (Runner, Vec<(f64, f64)>) {
+) -> (Runner, Vec<(f64, f64, f64)>) {
     let w = 1.5;
     let v0 = Vector3::new(1.0, 1.0, 0.0);
     let a_w = Vector3::new(0.8, -0.4, 0.0);
@@ -333,7 +333,7 @@ fn sparse_turning_walk(
         .iter()
         .map(|p: &FramePose| {
             let v = v0 + a_w * (p.t - T_ACCEL).max(0.0);
-            (p.t, (p.velocity_world - v).norm())
+            (p.t, (p.velocity_world - v).norm(), p.unaided_s)
         })
         .collect();
     (r, errors)
@@ -346,7 +346,7 @@ fn sparse_frames_give_velocities_with_the_points_of_the_frames_before() {
     let c = *r.counters();
     assert_eq!((c.ego_ok, c.ego_stacked), (0, 0), "{c:?}");
     assert!(c.ego_too_few >= 55, "{c:?}");
-    assert!(errors.iter().all(|&(_, e)| e > 1.0), "{errors:?}");
+    assert!(errors.iter().all(|&(_, e, _)| e > 1.0), "{errors:?}");
 
     // Kept for 0.25 s, the points of the frames before, carried through the turn (0.15-0.3 rad),
     // the lever arm and the acceleration, join each frame's and agree with its own within the
@@ -356,9 +356,42 @@ fn sparse_frames_give_velocities_with_the_points_of_the_frames_before() {
     assert_eq!(c.ego_ok, 0, "{c:?}");
     assert!(c.ego_stacked >= 25, "{c:?}");
     assert_eq!(r.filter_counters().gated, 0, "{:?}", r.filter_counters());
-    for &(t, e) in errors.iter().filter(|(t, _)| *t > 2.0) {
+    for &(t, e, _) in errors.iter().filter(|(t, _, _)| *t > 2.0) {
         assert!(e < 0.12, "t {t:.2}: velocity error {e:.3} m/s");
     }
+}
+
+#[test]
+fn each_pose_says_how_long_it_rested_on_the_imu_alone() {
+    // No frame gives a velocity alone and the rig turns (never at rest): from its first pose on,
+    // every pose rests on the IMU alone, and the longest stretch is the whole run.
+    let (r, poses) = sparse_turning_walk(0.0, 4, 0.01);
+    let t0 = poses[0].0;
+    let t1 = poses[poses.len() - 1].0;
+    for &(t, _, unaided) in &poses {
+        assert!((unaided - (t - t0)).abs() < 1e-9, "t {t:.2}: {unaided} s");
+    }
+    let u = r.longest_unaided();
+    assert!((u.from_s - t0).abs() < 1e-9, "{u:?}");
+    assert!((u.length_s - (t1 - t0)).abs() < 1e-9, "{u:?}");
+    let flagged = poses.iter().filter(|p| p.0 - t0 > UNAIDED_AFTER_S).count();
+    assert_eq!(u.poses_unaided, flagged as u64, "{u:?}");
+    assert!(flagged > 30, "{flagged} of {}", poses.len());
+
+    // With the points of the frames before, every other frame gives a velocity: no pose rests
+    // on the IMU alone for long once the first one came, and none is counted unaided.
+    let (r, poses) = sparse_turning_walk(0.25, 4, 0.01);
+    let first = poses.iter().position(|p| p.2 == 0.0 && p.0 > poses[0].0);
+    let first = first.expect("a velocity was applied");
+    for &(t, _, unaided) in &poses[first..] {
+        assert!(
+            unaided < 0.35,
+            "t {t:.2}: {unaided} s since the last velocity"
+        );
+    }
+    let u = r.longest_unaided();
+    assert!(u.length_s < UNAIDED_AFTER_S, "{u:?}");
+    assert_eq!(u.poses_unaided, 0, "{u:?}");
 }
 
 /// Runs `seconds` of a stationary IMU at 100 Hz that drops its samples from 0.5 to 0.8 s of

@@ -48,6 +48,10 @@
 // Health flag: the estimator changed at this pose (same world frame, no new origin).
 #define POSE_LINK_HEALTH_HANDOVER (1 << 7)
 
+// Health flag: the pose rests on the IMU alone (no radar velocity, rest or learned measurement
+// applied for over a second); its position error grows until the flag clears.
+#define POSE_LINK_HEALTH_DEAD_RECKONING (1 << 8)
+
 // Estimator code: the learned milliEgo model.
 #define POSE_LINK_ESTIMATOR_MODEL 0
 

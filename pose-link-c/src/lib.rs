@@ -75,6 +75,9 @@ pub const POSE_LINK_HEALTH_PREDICTED: u16 = 1 << 5;
 pub const POSE_LINK_HEALTH_RESET: u16 = 1 << 6;
 /// Health flag: the estimator changed at this pose (same world frame, no new origin).
 pub const POSE_LINK_HEALTH_HANDOVER: u16 = 1 << 7;
+/// Health flag: the pose rests on the IMU alone (no radar velocity, rest or learned measurement
+/// applied for over a second); its position error grows until the flag clears.
+pub const POSE_LINK_HEALTH_DEAD_RECKONING: u16 = 1 << 8;
 
 /// Estimator code: the learned milliEgo model.
 pub const POSE_LINK_ESTIMATOR_MODEL: u8 = 0;
@@ -99,6 +102,7 @@ const _: () = {
     assert!(POSE_LINK_HEALTH_PREDICTED == Health::PREDICTED.0);
     assert!(POSE_LINK_HEALTH_RESET == Health::RESET.0);
     assert!(POSE_LINK_HEALTH_HANDOVER == Health::HANDOVER.0);
+    assert!(POSE_LINK_HEALTH_DEAD_RECKONING == Health::DEAD_RECKONING.0);
 };
 
 /// What a call did. Zero is success; the names of the message errors are those of

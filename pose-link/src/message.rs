@@ -35,6 +35,10 @@ impl Health {
     /// The estimator changed at this pose (for example the learned model handed over to the
     /// Doppler filter): the trajectory goes on in the same world frame, no new origin.
     pub const HANDOVER: Health = Health(1 << 7);
+    /// The pose rests on the IMU alone: the estimator applied no radar velocity, rest or learned
+    /// measurement for longer than a second (a scene the radar cannot see, a radar gone quiet).
+    /// Its position error grows with time until the flag clears.
+    pub const DEAD_RECKONING: Health = Health(1 << 8);
 
     /// True when every flag of `other` is set.
     pub fn contains(self, other: Health) -> bool {
@@ -55,7 +59,7 @@ impl Health {
             "predicted",
             "reset",
             "handover",
-            "bit8",
+            "dead_reckoning",
             "bit9",
             "bit10",
             "bit11",

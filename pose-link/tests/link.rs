@@ -287,3 +287,14 @@ fn udp_loopback_one_message_per_datagram() {
         assert_eq!(PoseMessage::decode(&buf[..n]), Ok(want));
     }
 }
+
+#[test]
+fn health_flags_are_named_and_unknown_bits_kept_by_number() {
+    let h = Health::RADAR_MISSING | Health::DEAD_RECKONING | Health(1 << 9);
+    assert_eq!(
+        h.names().collect::<Vec<_>>(),
+        ["radar_missing", "dead_reckoning", "bit9"]
+    );
+    assert!(h.contains(Health::DEAD_RECKONING));
+    assert!(!Health::HANDOVER.contains(Health::DEAD_RECKONING));
+}

@@ -6,6 +6,7 @@ use crate::composer::{wxyz_f32, Composed, Composer};
 use crate::estimator::{Built, ImuInput, Mounting, RadarInput, RelativePose};
 use crate::reader::RadarItem;
 use crate::sync::SyncOut;
+use milliego_odometry::runner::UNAIDED_AFTER_S;
 use milliego_odometry::strapdown::{ImuSample, NavState, Strapdown, STANDARD_GRAVITY};
 use nalgebra::{Isometry3, Vector3};
 use pose_link::{Estimator as Code, Health, PoseMessage};
@@ -185,10 +186,23 @@ impl Stage {
         }
     }
 
-    fn flags(&self, health: Health) -> Health {
+    /// The flags of a pose at `t` \[s\]: the synchroniser's `health`, the fallback, and
+    /// `DEAD_RECKONING` when the estimator producing it took no velocity aid for longer than
+    /// [`UNAIDED_AFTER_S`].
+    fn flags(&self, health: Health, t: f64) -> Health {
         let mut h = health.0;
         if self.built.model_fallback || self.use_fallback {
             h |= Health::MODEL_FALLBACK.0;
+        }
+        let active = match (&self.built.fallback, self.use_fallback) {
+            (Some(f), true) => f,
+            _ => &self.built.primary,
+        };
+        if active
+            .last_aid_s()
+            .is_some_and(|at| t - at > UNAIDED_AFTER_S)
+        {
+            h |= Health::DEAD_RECKONING.0;
         }
         Health(h)
     }
@@ -310,7 +324,7 @@ impl Stage {
             let msg = self.message(
                 &p,
                 None,
-                Health(self.flags(health).0 | Health::PREDICTED.0),
+                Health(self.flags(health, t).0 | Health::PREDICTED.0),
                 t,
                 radar_missing,
             );
@@ -397,7 +411,7 @@ impl Stage {
         }
         self.predict = Some(sd);
         self.anchor = Some((c.pose, nav));
-        let mut flags = self.flags(health);
+        let mut flags = self.flags(health, r.t_to);
         if c.reset || self.pending_reset {
             flags = Health(flags.0 | Health::RESET.0);
             self.pending_reset = false;

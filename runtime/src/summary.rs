@@ -118,6 +118,17 @@ pub struct FilterSummary {
     /// Points that did not vote as possible near-field leakage.
     #[serde(default)]
     pub near_field_points: u64,
+    /// The longest stretch the filter's poses rested on the IMU alone \[s\]: no radar
+    /// velocity, rest or learned measurement applied (a scene the radar could not see).
+    #[serde(default)]
+    pub unaided_longest_s: f64,
+    /// When it began \[s, the run's clock\].
+    #[serde(default)]
+    pub unaided_from_s: f64,
+    /// The filter's poses given more than a second after an aid (published flagged
+    /// `dead_reckoning`).
+    #[serde(default)]
+    pub poses_unaided: u64,
 }
 
 impl From<milliego_odometry::rio::RioCounters> for FilterSummary {

@@ -79,9 +79,16 @@ impl Estimator for Classical {
                     .near_field_leakage()
                     .map_or((0, 0), |(tested, zero, _)| (tested, zero)),
                 near_field_points: self.runner.counters().near_field_points,
+                unaided_longest_s: self.runner.longest_unaided().length_s,
+                unaided_from_s: self.runner.longest_unaided().from_s,
+                poses_unaided: self.runner.longest_unaided().poses_unaided,
                 ..self.runner.filter_counters().into()
             }
         })
+    }
+
+    fn last_aid_s(&self) -> Option<f64> {
+        self.runner.last_aid_s()
     }
 
     fn name(&self) -> &'static str {

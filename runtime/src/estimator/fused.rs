@@ -115,6 +115,10 @@ impl Estimator for Fused {
         Estimator::filter(&self.classical)
     }
 
+    fn last_aid_s(&self) -> Option<f64> {
+        self.classical.last_aid_s()
+    }
+
     fn learned(&self) -> Option<LearnedSummary> {
         let r = self.classical.runner();
         let c = r.learned_counters();

@@ -127,6 +127,14 @@ pub trait Estimator: Send {
     fn filter(&self) -> Option<crate::summary::FilterSummary> {
         None
     }
+    /// When the estimator last took a velocity aid (radar velocity, rest, learned measurement)
+    /// \[s, the input clock\], for an estimator that integrates the IMU between aids
+    /// ([`milliego_odometry::runner::Runner::last_aid_s`]); None otherwise (the model alone).
+    /// A pose at `t` more than [`milliego_odometry::runner::UNAIDED_AFTER_S`] after it is
+    /// flagged `DEAD_RECKONING`.
+    fn last_aid_s(&self) -> Option<f64> {
+        None
+    }
 }
 
 /// Which estimator a run uses.
