@@ -20,7 +20,10 @@
 //!   integrated in between, join that frame's consensus (each point is used once);
 //! * IMU gaps: a frame more than [`ClassicalConfig::imu_gap_s`] after the last IMU sample is
 //!   dead-reckoned from its ego-velocity alone, and the filter re-anchors at the dead-reckoned
-//!   state when the IMU returns.
+//!   state when the IMU returns;
+//! * aids: each pose says how long it has rested on the IMU alone ([`FramePose::unaided_s`]: since
+//!   the last radar velocity, rest update or learned measurement), and the run keeps its longest
+//!   such stretch ([`Runner::longest_unaided`]).
 //!
 //! Order: a frame may come either just before the first IMU sample at or past its time (the
 //! offline order) or just after it (the runtime synchroniser's order). Either way its prior is
