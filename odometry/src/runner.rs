@@ -490,11 +490,14 @@ impl Runner {
     /// Velocity aids applied so far: radar velocities, rest updates (over every filter of the
     /// run) and learned measurements, and radar velocities that carried a gap in the IMU.
     fn aids(&self) -> u64 {
-        let now = self
-            .rio
+        self.aids_before + self.filter_aids() + self.learned.applied
+    }
+
+    /// Radar velocities and rest updates the current filter applied.
+    fn filter_aids(&self) -> u64 {
+        self.rio
             .as_ref()
-            .map_or(0, |r| r.counters().updates + r.counters().rest_updates);
-        self.aids_before + now + self.learned.applied
+            .map_or(0, |r| r.counters().updates + r.counters().rest_updates)
     }
 
     /// The time since the last aid at a pose at `t` \[s\] ([`FramePose::unaided_s`]), noting a
@@ -592,10 +595,7 @@ impl Runner {
             // dead-reckoned state (tilt and biases re-learned, the pose kept).
             let st = NavState { t: s.t, ..d };
             self.count_behind();
-            self.aids_before += self
-                .rio
-                .as_ref()
-                .map_or(0, |r| r.counters().updates + r.counters().rest_updates);
+            self.aids_before += self.filter_aids();
             self.rio = Some(self.filter_from(Rio::new(self.cfg.rio, self.mount, st)));
             self.counters.imu_restarts += 1;
             self.clear_stack();

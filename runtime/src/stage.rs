@@ -3,7 +3,7 @@
 //! decides the health flags.
 
 use crate::composer::{wxyz_f32, Composed, Composer};
-use crate::estimator::{Built, ImuInput, Mounting, RadarInput, RelativePose};
+use crate::estimator::{Built, Estimator, ImuInput, Mounting, RadarInput, RelativePose};
 use crate::reader::RadarItem;
 use crate::sync::SyncOut;
 use milliego_odometry::runner::UNAIDED_AFTER_S;
@@ -169,12 +169,17 @@ impl Stage {
         }
     }
 
-    fn code(&self, radar_missing: bool) -> Code {
-        let name = if self.use_fallback {
-            self.built.fallback.as_ref().map_or("doppler", |e| e.name())
+    /// The estimator producing the poses: the primary, or the fallback once handed over.
+    fn active(&self) -> Option<&dyn Estimator> {
+        if self.use_fallback {
+            self.built.fallback.as_deref()
         } else {
-            self.built.primary.name()
-        };
+            Some(&*self.built.primary)
+        }
+    }
+
+    fn code(&self, radar_missing: bool) -> Code {
+        let name = self.active().map_or("doppler", |e| e.name());
         if radar_missing {
             return Code::Imu;
         }
@@ -194,12 +199,9 @@ impl Stage {
         if self.built.model_fallback || self.use_fallback {
             h |= Health::MODEL_FALLBACK.0;
         }
-        let active = match (&self.built.fallback, self.use_fallback) {
-            (Some(f), true) => f,
-            _ => &self.built.primary,
-        };
-        if active
-            .last_aid_s()
+        if self
+            .active()
+            .and_then(|e| e.last_aid_s())
             .is_some_and(|at| t - at > UNAIDED_AFTER_S)
         {
             h |= Health::DEAD_RECKONING.0;

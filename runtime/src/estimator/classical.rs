@@ -67,6 +67,7 @@ impl Estimator for Classical {
     fn filter(&self) -> Option<crate::summary::FilterSummary> {
         self.runner.uses_radar().then(|| {
             let p = self.runner.persist_counters();
+            let unaided = self.runner.longest_unaided();
             crate::summary::FilterSummary {
                 frames_weighed: p.frames,
                 points_seen_again: p.seen_again,
@@ -79,9 +80,9 @@ impl Estimator for Classical {
                     .near_field_leakage()
                     .map_or((0, 0), |(tested, zero, _)| (tested, zero)),
                 near_field_points: self.runner.counters().near_field_points,
-                unaided_longest_s: self.runner.longest_unaided().length_s,
-                unaided_from_s: self.runner.longest_unaided().from_s,
-                poses_unaided: self.runner.longest_unaided().poses_unaided,
+                unaided_longest_s: unaided.length_s,
+                unaided_from_s: unaided.from_s,
+                poses_unaided: unaided.poses_unaided,
                 ..self.runner.filter_counters().into()
             }
         })
