@@ -60,6 +60,12 @@ pub struct OdometryArgs {
     /// deviation (default 1.0, walking pace; 0 turns it off; ground vehicles, --vehicle, never).
     #[arg(long)]
     horizontal_bound: Option<f64>,
+    /// Walking-pace bound in m/s: when the filter is less sure of its horizontal speed than
+    /// this (the radar gave no velocity for a while), "the speed is the one it held at its last
+    /// radar update" with this deviation (default 0.25; 0 turns it off; ground vehicles,
+    /// --vehicle, never).
+    #[arg(long)]
+    pace_bound: Option<f64>,
     /// Radar-to-IMU time offset: `auto` estimates it online where the session's radar times are
     /// late by an unknown amount (imported scans timed by their arrival in the bag), `off`
     /// never, or a number, the initial uncertainty in seconds to estimate it from (e.g. 0.05,
@@ -143,6 +149,9 @@ pub fn run(a: OdometryArgs) -> Result<()> {
     if let Some(v) = a.horizontal_bound {
         cfg.rio.horizontal_velocity_std = if v > 0.0 { v } else { f64::INFINITY };
     }
+    if let Some(v) = a.pace_bound {
+        cfg.rio.pace_std = if v > 0.0 { v } else { f64::INFINITY };
+    }
     cfg.time_offset = a.time_offset;
     cfg.imu_noise = a.imu_noise;
     if a.vehicle {
@@ -175,7 +184,7 @@ pub fn run(a: OdometryArgs) -> Result<()> {
             "ego_velocity": {"ok": r.ego_ok, "degenerate": r.ego_degenerate, "too_few_points": r.ego_too_few, "no_consensus": r.ego_no_consensus, "stacked": r.ego_stacked},
             "points_seen_again": {"frames": r.persist.frames, "seen_again": r.persist.seen_again, "fresh": r.persist.fresh},
             "unaided": {"longest_s": r.unaided.length_s, "from_s": r.unaided.from_s, "poses_over_s": UNAIDED_AFTER_S, "poses": r.unaided.poses_unaided},
-            "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "rest_refuted": r.rest_refuted, "vertical_bounds": r.vertical_bounds, "horizontal_bounds": r.horizontal_bounds, "nis_mean": r.nis_mean, "radar_noise_scale": r.radar_noise_scale},
+            "filter": {"updates": r.updates, "gated": r.gated, "rest_samples": r.rest_samples, "rest_updates": r.rest_updates, "rest_refuted": r.rest_refuted, "vertical_bounds": r.vertical_bounds, "horizontal_bounds": r.horizontal_bounds, "pace_bounds": r.pace_bounds, "nis_mean": r.nis_mean, "radar_noise_scale": r.radar_noise_scale},
             "barometer": if r.pressure_readings == 0 { json!("none in the session: height from radar and IMU only") } else if a.no_barometer { json!(format!("{} readings ignored (--no-barometer)", r.pressure_readings)) } else { json!({"readings": r.pressure_readings, "updates": r.baro_updates, "rejected": r.baro_rejected, "reanchors": r.baro_reanchors}) },
             "doppler_step": doppler_step_json(r.doppler_step, a.doppler_step.is_some()),
             "imu_noise": r.imu_noise,

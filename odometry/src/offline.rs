@@ -207,6 +207,8 @@ pub struct OfflineResult {
     pub vertical_bounds: u64,
     /// Horizontal velocity bounds applied ([`RioConfig::horizontal_velocity_std`]).
     pub horizontal_bounds: u64,
+    /// Walking-pace bounds applied ([`RioConfig::pace_std`]).
+    pub pace_bounds: u64,
     /// Mean normalised innovation square of the applied radar updates (3 when consistent).
     pub nis_mean: Option<f64>,
     /// The scale the filter applied to the radar velocity covariances at the end of the run
@@ -431,6 +433,7 @@ pub fn run_with_motions(
         unaided: runner.longest_unaided(),
         vertical_bounds: filter.vertical_bounds,
         horizontal_bounds: filter.horizontal_bounds,
+        pace_bounds: filter.pace_bounds,
         nis_mean: runner.filter().and_then(|f| f.nis_mean()),
         radar_noise_scale: runner.filter().map_or(1.0, |f| f.radar_noise_scale()),
         pressure_readings: baro.len(),

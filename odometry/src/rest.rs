@@ -119,6 +119,19 @@ pub struct RestConfig {
     /// at zero Doppler) looks just like it for its first half second or so, and its rate of
     /// turn taken as gyroscope bias turned the heading 1.7 deg/s for the rest of a 60 s run.
     pub unconfirmed_rate_margin_s: f64,
+    /// Specific-force spread \[m/s^2\] (sqrt of the covariance trace over the stillness
+    /// window) that only a walker's gait reaches: each step swings the specific force by
+    /// 2-5 m/s^2, where a robot or a car on a floor or a road stays well under 1.
+    pub gait_accel_std: f64,
+    /// How long after the IMU last showed a gait \[s\] a still IMU is taken for a walker who
+    /// stopped ([`RestConfig::gait_accel_std`]): it may then start a rest where the radar gives
+    /// no verdict (a sparse scene: the rest cannot wait for a frame to call it still), and the
+    /// filter's velocity, which the radar has not measured, does not refute it. A walker's
+    /// IMU is never still while it walks. `f64::INFINITY` gait spread: never.
+    pub gait_memory_s: f64,
+    /// How long the spread must last to be a gait \[s\] ([`RestConfig::gait_accel_std`]): a
+    /// walk goes on for seconds, a bump or a braking does not.
+    pub gait_min_s: f64,
 }
 
 impl Default for RestConfig {
@@ -141,6 +154,9 @@ impl Default for RestConfig {
             zero_rate_std_min: 0.002,
             rate_margin_s: 0.5,
             unconfirmed_rate_margin_s: 1.0,
+            gait_accel_std: 1.0,
+            gait_memory_s: 3.0,
+            gait_min_s: 2.0,
         }
     }
 }
@@ -176,6 +192,13 @@ pub struct RestDetector {
     /// Nothing has contradicted the rest the session starts in yet: every decided sample's IMU
     /// was still and no frame said moving.
     initial: bool,
+    /// The last sample whose IMU window showed a gait ([`RestConfig::gait_accel_std`]) \[s\].
+    gait_at: Option<f64>,
+    /// Since when the IMU windows have shown a gait's spread without a break \[s\].
+    gait_since: Option<f64>,
+    /// The current rest began as a walker's stop: on a still IMU after a gait, with no word from
+    /// the radar ([`RestConfig::gait_memory_s`]).
+    stopped_walker: bool,
 }
 
 /// Rest updates whose rates of turn are held back at most ([`RestConfig::rate_margin_s`]: 1.6 s
@@ -228,6 +251,9 @@ impl RestDetector {
             confirmed: false,
             refuted_at: [false; 2],
             initial: true,
+            gait_at: None,
+            gait_since: None,
+            stopped_walker: false,
         }
     }
 
@@ -303,7 +329,18 @@ impl RestDetector {
     /// Rest at the newest sample of the window (see [`RestDetector::push_imu`]).
     fn evaluate(&mut self) -> Option<RestUpdate> {
         let s = *self.window.back()?;
-        let still = self.imu_still();
+        let stats = self.window_stats();
+        let still = stats.is_some_and(|st| self.still_by(&st));
+        // A gait lasts: a bump or a braking swings the specific force for a moment, a walk for
+        // as long as it goes on.
+        if stats.is_some_and(|st| st.accel_std > self.cfg.gait_accel_std) {
+            let since = *self.gait_since.get_or_insert(s.t);
+            if s.t - since >= self.cfg.gait_min_s {
+                self.gait_at = Some(s.t);
+            }
+        } else {
+            self.gait_since = None;
+        }
         // The window fills over the first samples: only a full one that is not still ends the
         // initial rest.
         self.initial &= still || !self.window_decides();
@@ -315,6 +352,11 @@ impl RestDetector {
         if !now {
             self.end_rest();
             return None;
+        }
+        if self.since.is_none() {
+            // A rest begins: a walker's stop when only the gait just before says so.
+            self.stopped_walker =
+                !self.initial && !self.radar_says_still(s.t) && self.gait_recent(s.t);
         }
         self.gyro_sum += Vector3::from(s.gyro);
         self.gyro_n += 1;
@@ -371,6 +413,7 @@ impl RestDetector {
     /// The rest is over: its rates not yet taken go with it.
     fn end_rest(&mut self) {
         self.since = None;
+        self.stopped_walker = false;
         self.confirmed = false;
         self.gyro_sum = Vector3::zeros();
         self.gyro_n = 0;
@@ -448,7 +491,8 @@ impl RestDetector {
             Some(Verdict::Still) => true,
             // A frame without a verdict (or a stale "still"): the rest goes on, and so does the
             // one the session starts in, uncontradicted so far.
-            Some(Verdict::None) => self.resting[0] || self.initial,
+            // So does a walker's stop: a still IMU just after a gait.
+            Some(Verdict::None) => self.resting[0] || self.initial || self.gait_recent(t),
         }
     }
 
@@ -466,10 +510,24 @@ impl RestDetector {
     /// mean rate of turn is below [`RestConfig::gyro_rate_max`] and the mean specific force is
     /// gravity within [`RestConfig::gravity_tolerance`].
     pub fn imu_still(&self) -> bool {
+        self.window_stats().is_some_and(|st| self.still_by(&st))
+    }
+
+    /// Whether the window's statistics are those of rest (see [`RestDetector::imu_still`]).
+    fn still_by(&self, st: &WindowStats) -> bool {
+        // A steady turn or a steady pull has little spread: the means must be those of rest too.
+        st.accel_std < self.cfg.accel_std_max
+            && st.gyro_std < self.cfg.gyro_std_max
+            && st.gyro_mean.norm() < self.cfg.gyro_rate_max
+            && (st.accel_mean.norm() - self.cfg.gravity).abs() < self.cfg.gravity_tolerance
+    }
+
+    /// Means and spreads (sqrt of the covariance trace) of both triads over the window, once it
+    /// decides ([`RestDetector::window_decides`]).
+    fn window_stats(&self) -> Option<WindowStats> {
         if !self.window_decides() {
-            return false;
+            return None;
         }
-        // Mean and spread (sqrt of the covariance trace) of one triad over the window.
         let stats = |get: fn(&ImuSample) -> [f64; 3]| {
             let n = self.window.len() as f64;
             let mean = self
@@ -485,14 +543,37 @@ impl RestDetector {
                 / (n - 1.0);
             (mean, var.sqrt())
         };
-        let (f, f_std) = stats(|s| s.accel);
-        let (w, w_std) = stats(|s| s.gyro);
-        // A steady turn or a steady pull has little spread: the means must be those of rest too.
-        f_std < self.cfg.accel_std_max
-            && w_std < self.cfg.gyro_std_max
-            && w.norm() < self.cfg.gyro_rate_max
-            && (f.norm() - self.cfg.gravity).abs() < self.cfg.gravity_tolerance
+        let (accel_mean, accel_std) = stats(|s| s.accel);
+        let (gyro_mean, gyro_std) = stats(|s| s.gyro);
+        Some(WindowStats {
+            accel_mean,
+            accel_std,
+            gyro_mean,
+            gyro_std,
+        })
     }
+
+    /// Whether a walker's gait was seen within [`RestConfig::gait_memory_s`] of `t` \[s\].
+    fn gait_recent(&self, t: f64) -> bool {
+        self.gait_at
+            .is_some_and(|g| t - g <= self.cfg.gait_memory_s)
+    }
+
+    /// Whether the current rest began as a walker's stop the radar could not confirm
+    /// ([`RestConfig::gait_memory_s`]): the filter's velocity, which no radar measured, is no
+    /// evidence against it.
+    pub fn stopped_walker(&self) -> bool {
+        self.stopped_walker
+    }
+}
+
+/// Means \[m/s^2, rad/s\] and spreads (sqrt of the covariance trace) of the IMU window.
+#[derive(Debug, Clone, Copy)]
+struct WindowStats {
+    accel_mean: Vector3<f64>,
+    accel_std: f64,
+    gyro_mean: Vector3<f64>,
+    gyro_std: f64,
 }
 
 /// Probability of at most `k` successes in `n` independent trials of probability `p` (summed
@@ -543,6 +624,74 @@ mod tests {
             t += 0.005;
         }
         out
+    }
+
+    /// A walker's IMU: a 2 Hz step swinging the vertical specific force by 3 m/s^2 and the
+    /// forward one by 1 m/s^2 at the stride's 1 Hz, with the trunk's sway in the rate of turn.
+    fn walking_imu(t: f64) -> ImuSample {
+        let step = 2.0 * std::f64::consts::PI * 2.0 * t;
+        ImuSample {
+            t,
+            accel: [(0.5 * step).sin(), 0.0, 9.81 + 3.0 * step.sin()],
+            gyro: [0.2 * (0.5 * step).cos(), 0.1 * step.sin(), 0.05],
+        }
+    }
+
+    /// Feeds 200 Hz samples of `imu` over `from..to` \[s\] with a 20 Hz frame before each
+    /// twentieth that gives no verdict (three points, one at zero Doppler, no velocity: a sparse
+    /// scene); returns the updates due.
+    fn feed_sparse(
+        d: &mut RestDetector,
+        from: f64,
+        to: f64,
+        imu: fn(f64) -> ImuSample,
+    ) -> Vec<RestUpdate> {
+        let mut out = Vec::new();
+        let mut k = 0;
+        let mut t = from;
+        while t < to {
+            if k % 10 == 0 {
+                assert_eq!(d.push_radar(t, None, 1, 3), Verdict::None);
+            }
+            out.extend(d.push_imu(&imu(t)));
+            t += 0.005;
+            k += 1;
+        }
+        out
+    }
+
+    #[test]
+    fn a_walker_who_stops_where_the_radar_says_nothing_comes_to_rest() {
+        let mut d = RestDetector::new(RestConfig::default());
+        assert!(feed_sparse(&mut d, 0.0, 4.0, walking_imu).is_empty());
+        assert!(!d.resting() && !d.initial());
+        // The walker stops: the IMU is still within the stillness window, and the rest begins
+        // on the gait just before it, though no frame ever called it still.
+        let ups = feed_sparse(&mut d, 4.0, 6.0, still_imu);
+        assert!(d.resting() && d.stopped_walker());
+        let first = ups.first().expect("rest updates");
+        assert!(first.first && first.t > 4.0 && first.t < 4.7, "{ups:?}");
+        // Walking again ends it.
+        feed_sparse(&mut d, 6.0, 7.0, walking_imu);
+        assert!(!d.resting() && !d.stopped_walker());
+    }
+
+    #[test]
+    fn a_bump_or_a_braking_is_no_gait() {
+        // The same swing for a second only (a robot over a threshold, a braking): a still IMU
+        // after it is not taken for a walker's stop where the radar says nothing.
+        let mut d = RestDetector::new(RestConfig::default());
+        feed_sparse(&mut d, 0.0, 1.0, walking_imu);
+        assert!(feed_sparse(&mut d, 1.0, 4.0, still_imu).is_empty());
+        assert!(!d.resting());
+        // Nor is any swing when the gait test is off (ground vehicles).
+        let mut d = RestDetector::new(RestConfig {
+            gait_accel_std: f64::INFINITY,
+            ..RestConfig::default()
+        });
+        feed_sparse(&mut d, 0.0, 4.0, walking_imu);
+        assert!(feed_sparse(&mut d, 4.0, 6.0, still_imu).is_empty());
+        assert!(!d.resting());
     }
 
     #[test]

@@ -39,6 +39,20 @@ type Mn = SMatrix<f64, N, N>;
 type Vn = SVector<f64, N>;
 type M3xN = SMatrix<f64, 3, N>;
 
+/// Smallest pace \[m/s\] the walking-pace bound holds ([`RioConfig::pace_std`]): below it the
+/// rig creeps or stands, the speed's direction is poorly defined, and the horizontal bound is
+/// the prior that fits.
+pub const PACE_MIN: f64 = 0.3;
+
+/// Time constant of the pace \[s\] ([`RioConfig::pace_std`]): the speed after each radar update
+/// is averaged over about a step cycle (a walker's speed swings within each step; a single
+/// update also carries its own noise), older updates fading as `exp(-dt / PACE_TAU_S)`.
+pub const PACE_TAU_S: f64 = 0.5;
+
+/// Smallest horizontal speed of the filter \[m/s\] that gives the walking-pace bound its
+/// direction.
+pub const PACE_DIRECTION_MIN: f64 = 0.1;
+
 /// Noise densities and initial uncertainties.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RioConfig {
@@ -90,6 +104,18 @@ pub struct RioConfig {
     /// the velocity away to 10 m/s. A filter that knows its velocity is never touched. Ground
     /// vehicles ([`RioConfig::nonholonomic_std`] finite) are exempt; `f64::INFINITY`: never.
     pub horizontal_velocity_std: f64,
+    /// Walking-pace bound \[m/s\]: at a radar frame, when the filter is less sure of its
+    /// horizontal speed than this, it takes "the speed is the pace" with this deviation, the
+    /// pace being the speed it held after its last radar update (a walker or robot keeps its
+    /// pace when the radar stops seeing: 1.0-1.5 m/s walking, drifting slowly). The horizontal
+    /// bound ([`RioConfig::horizontal_velocity_std`]) alone pulls a lost filter towards
+    /// standing still: a walk the radar lost for 27 s read 0.3-0.6 m/s against the truth's
+    /// 1.2-1.4 m/s. The direction stays the filter's own (from the IMU). A filter that knows
+    /// its speed is never touched; no pace below [`PACE_MIN`] (the horizontal bound is then
+    /// the right prior), none after a rest or [`Rio::forget_pace`]; ground vehicles
+    /// ([`RioConfig::nonholonomic_std`] finite) are exempt. Default 0.25 (chosen on the
+    /// validation sets, docs/odometry.md "Walking pace"); `f64::INFINITY`: never.
+    pub pace_std: f64,
     /// Uncertainty of a radar measurement's time on the IMU clock \[s\] (exposure spread,
     /// clock mapping): the measurement covariance gains `J J^T sigma_t^2`, `J` the rate of change
     /// of the predicted radar velocity (body acceleration, rotation of the body velocity, angular
@@ -293,6 +319,7 @@ impl Default for RioConfig {
             radar_heading: false,
             vertical_velocity_std: 0.5,
             horizontal_velocity_std: 1.0,
+            pace_std: 0.25,
             time_sigma_s: 0.005,
             baro_std_m: 0.3,
             baro_bias_walk: 0.02,
@@ -368,6 +395,8 @@ pub struct RioCounters {
     pub vertical_bounds: u64,
     /// Horizontal velocity bounds applied ([`RioConfig::horizontal_velocity_std`]).
     pub horizontal_bounds: u64,
+    /// Walking-pace bounds applied ([`RioConfig::pace_std`]).
+    pub pace_bounds: u64,
     /// Barometric heights applied.
     pub baro_updates: u64,
     /// Barometric heights rejected (not finite, or outside a 99.9% gate).
@@ -492,6 +521,11 @@ pub struct Rio {
     counters: RioCounters,
     started: bool,
     gated_run: u32,
+    /// The pace ([`RioConfig::pace_std`]): the horizontal speed \[m/s\] after the radar updates
+    /// and the filter's variance of it then \[m^2/s^2\], both averaged over [`PACE_TAU_S`].
+    pace: Option<(f64, f64)>,
+    /// Time of the last radar update \[s\] (the pace's).
+    pace_t: f64,
     /// Sum of the applied radar updates' normalised innovation squares (3 dof each).
     nis_sum: f64,
     /// Scale of the radar velocity covariances (1 unless adapted, [`RioConfig::radar_noise_window`]).
@@ -550,6 +584,8 @@ impl Rio {
             counters: RioCounters::default(),
             started: false,
             gated_run: 0,
+            pace: None,
+            pace_t: 0.0,
             nis_sum: 0.0,
             noise_scale: 1.0,
             noise_information: 0.0,
@@ -688,7 +724,7 @@ impl Rio {
                     self.nonholonomic();
                 }
                 Pending::Frame(_) => {
-                    self.bound_velocity(true);
+                    self.bound_velocity(true, false);
                     self.nonholonomic();
                 }
                 Pending::Height(_, h) => self.height_update(h),
@@ -712,7 +748,7 @@ impl Rio {
     /// ([`RioConfig::vertical_velocity_std`]) is applied at its time, as after a frame's update.
     pub fn push_frame_without_velocity(&mut self, t: f64) {
         if self.started && t <= self.nav.state().t {
-            self.bound_velocity(true);
+            self.bound_velocity(true, false);
             self.nonholonomic();
         } else {
             self.pending.push(Pending::Frame(t));
@@ -733,11 +769,66 @@ impl Rio {
         self.counters.vertical_bounds += 1;
     }
 
-    /// The velocity bounds after a radar frame: horizontal, then vertical (`unseen`: the frame
-    /// did not see the vertical velocity).
-    fn bound_velocity(&mut self, unseen: bool) {
+    /// The velocity bounds after a radar frame: walking pace (unless the frame's velocity was
+    /// just applied, `aided`: the pace would count that update twice), horizontal, then vertical
+    /// (`unseen`: the frame did not see the vertical velocity).
+    fn bound_velocity(&mut self, unseen: bool, aided: bool) {
+        if !aided {
+            self.bound_pace();
+        }
         self.bound_horizontal();
         self.bound_vertical(unseen);
+    }
+
+    /// Walking-pace bound ([`RioConfig::pace_std`]): when the filter is less sure of its
+    /// horizontal speed than the bound's deviation, "horizontal speed = the pace" (the speed it
+    /// held after its last radar update) with that deviation, along its own velocity's
+    /// direction, heading kept out of the gain as for radar updates. Not for ground vehicles,
+    /// nor without a pace (none yet, or forgotten: [`Rio::forget_pace`], a rest), nor below
+    /// [`PACE_MIN`], nor when the filter's own horizontal velocity is too small to give a
+    /// direction.
+    fn bound_pace(&mut self) {
+        let std = self.cfg.pace_std;
+        let Some((pace, pace_var)) = self.pace else {
+            return;
+        };
+        if !(std.is_finite() && std > 0.0)
+            || self.cfg.nonholonomic_std.is_finite()
+            || pace < PACE_MIN
+        {
+            return;
+        }
+        let (speed, h, var) = self.speed_along_velocity();
+        // The pace is as uncertain as the filter's speed was when the radar measured it.
+        let r = std * std + pace_var;
+        if speed < PACE_DIRECTION_MIN || var <= r {
+            return;
+        }
+        self.scalar_update(&h, pace - speed, r);
+        self.counters.pace_bounds += 1;
+    }
+
+    /// The horizontal speed \[m/s\], the Jacobian row of the speed (the unit horizontal velocity
+    /// on the velocity states; zero below [`PACE_DIRECTION_MIN`]) and the filter's variance of
+    /// the speed along it \[m^2/s^2\] (below [`PACE_DIRECTION_MIN`], the mean horizontal
+    /// component variance).
+    fn speed_along_velocity(&self) -> (f64, Vn, f64) {
+        let v = self.nav.state().v;
+        let speed = v.xy().norm();
+        let mut h = Vn::zeros();
+        if speed < PACE_DIRECTION_MIN {
+            return (speed, h, 0.5 * (self.p[(3, 3)] + self.p[(4, 4)]));
+        }
+        h[3] = v.x / speed;
+        h[4] = v.y / speed;
+        (speed, h, h.dot(&(self.p * h)))
+    }
+
+    /// Forgets the pace the walking-pace bound holds ([`RioConfig::pace_std`]) until the next
+    /// radar update: the IMU went still where no rest could be declared (a walker who stopped
+    /// where the radar sees nothing).
+    pub fn forget_pace(&mut self) {
+        self.pace = None;
     }
 
     /// Horizontal velocity bound ([`RioConfig::horizontal_velocity_std`]): each world horizontal
@@ -1007,7 +1098,9 @@ impl Rio {
     }
 
     fn update(&mut self, m: &VelocityMeasurement) {
+        let applied = self.counters.updates;
         self.update_gated(m, true);
+        let aided = self.counters.updates > applied;
         // How well this frame saw the world vertical velocity: its covariance rotated into the
         // world frame.
         let r_wr = (self.nav.state().q * self.mount.rotation)
@@ -1017,7 +1110,7 @@ impl Rio {
             * Matrix3::from_fn(|i, j| m.covariance[i][j] * self.noise_scale)
             * r_wr.transpose();
         let std = self.cfg.vertical_velocity_std;
-        self.bound_velocity(c[(2, 2)] > std * std);
+        self.bound_velocity(c[(2, 2)] > std * std, aided);
     }
 
     fn update_gated(&mut self, m: &VelocityMeasurement, gate: bool) {
@@ -1081,6 +1174,7 @@ impl Rio {
             self.adapt_noise(&y, &si, &given);
         }
         self.correct(&y, &h, &rm, &si, !self.cfg.radar_heading);
+        self.refresh_pace();
         self.counters.updates += 1;
         self.nis_sum += d2;
     }
@@ -1175,7 +1269,21 @@ impl Rio {
         let s = h * self.p * h.transpose() + rm;
         if let Some(si) = s.try_inverse() {
             self.correct(y, &h, rm, &si, !self.cfg.radar_heading);
+            self.refresh_pace();
         }
+    }
+
+    /// After an aid (a radar update, a learned velocity): the pace the walking-pace bound holds
+    /// ([`RioConfig::pace_std`]) takes the speed the filter holds now, and its variance.
+    fn refresh_pace(&mut self) {
+        let t = self.nav.state().t;
+        let (speed, _, var) = self.speed_along_velocity();
+        let a = self.pace.map_or(1.0, |_| {
+            1.0 - (-(t - self.pace_t).max(0.0) / PACE_TAU_S).exp()
+        });
+        let (p, pv) = self.pace.unwrap_or((speed, var));
+        self.pace = Some((p + a * (speed - p), pv + a * (var - pv)));
+        self.pace_t = t;
     }
 
     /// Zero-velocity pseudo-measurement: the body is at rest, its world velocity zero with
@@ -1183,6 +1291,7 @@ impl Rio {
     /// observe heading (rotating the state about the vertical leaves zero zero), so, as for the
     /// radar updates, its gain leaves the heading alone unless [`RioConfig::radar_heading`].
     pub fn zero_velocity(&mut self, std: f64) {
+        self.pace = None;
         let mut h = M3xN::zeros();
         h.fixed_view_mut::<3, 3>(0, 3)
             .copy_from(&Matrix3::identity());

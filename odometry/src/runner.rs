@@ -449,7 +449,15 @@ impl Runner {
             lattice: DopplerLattice::new(),
             leakage: LeakageDetector::new(),
             configured_step: cfg.ego.doppler_step,
-            rest: RestDetector::new(cfg.rest),
+            rest: RestDetector::new(RestConfig {
+                // A ground vehicle has no gait: braking and rough roads swing its IMU too.
+                gait_accel_std: if cfg.rio.nonholonomic_std.is_finite() {
+                    f64::INFINITY
+                } else {
+                    cfg.rest.gait_accel_std
+                },
+                ..cfg.rest
+            }),
             rest_anchor: None,
             before: None,
             behind_counted: None,
@@ -935,7 +943,9 @@ impl Runner {
         let due = due.filter(|_| {
             // A rest the filter's velocity contradicts is refuted, not applied (not the rest the
             // session starts in: the filter starts from it).
-            let ok = self.rest.initial() || rio.at_rest_consistent(c.zero_velocity_std);
+            let ok = self.rest.initial()
+                || self.rest.stopped_walker()
+                || rio.at_rest_consistent(c.zero_velocity_std);
             if !ok {
                 self.rest.refute();
                 self.counters.rest_refuted += 1;
@@ -1169,6 +1179,11 @@ impl Runner {
             self.keep_for_stack(t, dets);
         }
         if let Some(rio) = self.rio.as_mut() {
+            if still && !at_rest {
+                // The IMU is still where no rest is declared: a walker may have stopped where
+                // the radar sees nothing, so the pace it walked at no longer holds.
+                rio.forget_pace();
+            }
             if let Some(m) = m {
                 // Applied now only behind the latest sample (else at the next one, where
                 // `filter_imu` counts it): counted at the next sample, as offline.

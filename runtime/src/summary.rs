@@ -80,6 +80,9 @@ pub struct FilterSummary {
     /// "Horizontal velocity 0" bounds where the filter had lost its velocity (no radar velocity
     /// for long; not for ground vehicles).
     pub horizontal_bounds: u64,
+    /// "Horizontal speed = the pace" bounds where the filter had lost its speed after the radar
+    /// last measured it (not for ground vehicles).
+    pub pace_bounds: u64,
     /// Barometric heights applied.
     pub baro_updates: u64,
     /// Barometric heights rejected (not finite, or beyond the 99.9% gate).
@@ -140,6 +143,7 @@ impl From<milliego_odometry::rio::RioCounters> for FilterSummary {
             rest_updates: c.rest_updates,
             vertical_bounds: c.vertical_bounds,
             horizontal_bounds: c.horizontal_bounds,
+            pace_bounds: c.pace_bounds,
             baro_updates: c.baro_updates,
             baro_rejected: c.baro_rejected,
             baro_reanchors: c.baro_reanchors,
