@@ -126,8 +126,9 @@ pub struct RestConfig {
     /// How long after the IMU last showed a gait \[s\] a still IMU is taken for a walker who
     /// stopped ([`RestConfig::gait_accel_std`]): it may then start a rest where the radar gives
     /// no verdict (a sparse scene: the rest cannot wait for a frame to call it still), and the
-    /// filter's velocity, which the radar has not measured, does not refute it. A walker's
-    /// IMU is never still while it walks. `f64::INFINITY` gait spread: never.
+    /// filter's velocity does not refute that rest, nor one a frame called still (a walker's
+    /// IMU is never still while it walks: a velocity the filter still holds is its error, not a
+    /// smooth cruise). `f64::INFINITY` gait spread: never.
     pub gait_memory_s: f64,
     /// How long the spread must last to be a gait \[s\] ([`RestConfig::gait_accel_std`]): a
     /// walk goes on for seconds, a bump or a braking does not.
@@ -196,8 +197,8 @@ pub struct RestDetector {
     gait_at: Option<f64>,
     /// Since when the IMU windows have shown a gait's spread without a break \[s\].
     gait_since: Option<f64>,
-    /// The current rest began as a walker's stop: on a still IMU after a gait, with no word from
-    /// the radar ([`RestConfig::gait_memory_s`]).
+    /// The current rest began as a walker's stop: on a still IMU just after a gait
+    /// ([`RestConfig::gait_memory_s`]).
     stopped_walker: bool,
 }
 
@@ -354,9 +355,9 @@ impl RestDetector {
             return None;
         }
         if self.since.is_none() {
-            // A rest begins: a walker's stop when only the gait just before says so.
-            self.stopped_walker =
-                !self.initial && !self.radar_says_still(s.t) && self.gait_recent(s.t);
+            // A rest begins: a walker's stop when the gait was just before it (whether or not
+            // a frame calls it still).
+            self.stopped_walker = !self.initial && self.gait_recent(s.t);
         }
         self.gyro_sum += Vector3::from(s.gyro);
         self.gyro_n += 1;
@@ -559,9 +560,8 @@ impl RestDetector {
             .is_some_and(|g| t - g <= self.cfg.gait_memory_s)
     }
 
-    /// Whether the current rest began as a walker's stop the radar could not confirm
-    /// ([`RestConfig::gait_memory_s`]): the filter's velocity, which no radar measured, is no
-    /// evidence against it.
+    /// Whether the current rest began as a walker's stop, on a still IMU just after a gait
+    /// ([`RestConfig::gait_memory_s`]): the filter's velocity is no evidence against it.
     pub fn stopped_walker(&self) -> bool {
         self.stopped_walker
     }
@@ -672,8 +672,24 @@ mod tests {
         let first = ups.first().expect("rest updates");
         assert!(first.first && first.t > 4.0 && first.t < 4.7, "{ups:?}");
         // Walking again ends it.
-        feed_sparse(&mut d, 6.0, 7.0, walking_imu);
+        feed_sparse(&mut d, 6.0, 9.0, walking_imu);
         assert!(!d.resting() && !d.stopped_walker());
+        // A stop a frame calls still is a walker's stop too (its filter's velocity cannot
+        // refute it).
+        for k in 0..20 {
+            let t = 9.0 + 0.05 * f64::from(k);
+            d.push_radar(t, ZERO, 12, 20);
+            feed(&mut d, t, t + 0.05);
+        }
+        assert!(d.resting() && d.stopped_walker());
+        // And a rest long after the gait is not.
+        feed(&mut d, 10.0, 14.0);
+        d.push_radar(14.0, FAST, 0, 20);
+        feed(&mut d, 14.0, 14.5);
+        assert!(!d.resting());
+        d.push_radar(14.5, ZERO, 12, 20);
+        feed(&mut d, 14.5, 15.0);
+        assert!(d.resting() && !d.stopped_walker());
     }
 
     #[test]
