@@ -701,22 +701,25 @@ fn a_robot_easing_into_a_turn_from_standstill_is_not_taken_for_gyro_bias() {
     }
 }
 
+/// The outdoor handheld walk of split v2's training set with `seed`, simulated.
+fn training_outdoor_walk(seed: u64) -> (tempfile::TempDir, Session) {
+    use milliego_sim::split::{Set, SplitVersion};
+    let e = SplitVersion::V2
+        .entries(Set::Train)
+        .into_iter()
+        .find(|e| e.family == Family::Outdoor && e.motion == MotionKind::Handheld && e.seed == seed)
+        .expect("an outdoor walk of the training set");
+    simulated(&e.scenario())
+}
+
 #[test]
 fn a_walk_the_radar_hardly_sees_does_not_run_away_horizontally() {
     // Two outdoor walks of split v2's training set with MEMS IMUs where the radar (tilted up,
     // sparse scene) gives no velocity for 10-30 s at a time: the IMU alone ran them away at up
     // to 10 m/s, 94 m and 9 m of ATE. The horizontal bound
     // (`RioConfig::horizontal_velocity_std`) keeps a lost filter at walking pace.
-    use milliego_sim::split::{Set, SplitVersion};
-    let entries = SplitVersion::V2.entries(Set::Train);
     for seed in [1102, 1100] {
-        let e = entries
-            .iter()
-            .find(|e| {
-                e.family == Family::Outdoor && e.motion == MotionKind::Handheld && e.seed == seed
-            })
-            .expect("an outdoor walk of the training set");
-        let (_dir, s) = simulated(&e.scenario());
+        let (_dir, s) = training_outdoor_walk(seed);
         let path = ate(&s, Estimator::Doppler).1;
         let r = run(&s, &OfflineConfig::default()).expect("offline run");
         let mut off = OfflineConfig::default();
@@ -758,16 +761,8 @@ fn a_walk_the_radar_loses_keeps_its_pace() {
     // lost filter towards standing still; the walking-pace bound (`RioConfig::pace_std`) holds
     // the speed the radar last measured, so the walk's speed over the stretch stays near the
     // truth's.
-    use milliego_sim::split::{Set, SplitVersion};
-    let entries = SplitVersion::V2.entries(Set::Train);
     for seed in [1100] {
-        let e = entries
-            .iter()
-            .find(|e| {
-                e.family == Family::Outdoor && e.motion == MotionKind::Handheld && e.seed == seed
-            })
-            .expect("an outdoor walk of the training set");
-        let (_dir, s) = simulated(&e.scenario());
+        let (_dir, s) = training_outdoor_walk(seed);
         let truth = s.groundtruth().unwrap().expect("ground truth");
         let r = run(&s, &OfflineConfig::default()).expect("offline run");
         let mut off = OfflineConfig::default();
