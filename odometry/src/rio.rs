@@ -104,10 +104,12 @@ pub struct RioConfig {
     /// the velocity away to 10 m/s. A filter that knows its velocity is never touched. Ground
     /// vehicles ([`RioConfig::nonholonomic_std`] finite) are exempt; `f64::INFINITY`: never.
     pub horizontal_velocity_std: f64,
-    /// Walking-pace bound \[m/s\]: at a radar frame, when the filter is less sure of its
-    /// horizontal speed than this, it takes "the speed is the pace" with this deviation, the
-    /// pace being the speed it held after its last radar update (a walker or robot keeps its
-    /// pace when the radar stops seeing: 1.0-1.5 m/s walking, drifting slowly). The horizontal
+    /// Walking-pace bound \[m/s\]: at a radar frame that gave no velocity, when the filter is
+    /// less sure of its horizontal speed than this (plus the pace's own uncertainty), it takes
+    /// "the speed is the pace" with that deviation, the pace being the speed it held after its
+    /// aids (radar updates, learned velocities), averaged over [`PACE_TAU_S`] (a walker or
+    /// robot keeps its pace when the radar stops seeing: 1.0-1.5 m/s walking, drifting
+    /// slowly). The horizontal
     /// bound ([`RioConfig::horizontal_velocity_std`]) alone pulls a lost filter towards
     /// standing still: a walk the radar lost for 27 s read 0.3-0.6 m/s against the truth's
     /// 1.2-1.4 m/s. The direction stays the filter's own (from the IMU). A filter that knows
@@ -524,7 +526,7 @@ pub struct Rio {
     /// The pace ([`RioConfig::pace_std`]): the horizontal speed \[m/s\] after the radar updates
     /// and the filter's variance of it then \[m^2/s^2\], both averaged over [`PACE_TAU_S`].
     pace: Option<(f64, f64)>,
-    /// Time of the last radar update \[s\] (the pace's).
+    /// Time of the last aid that set the pace \[s\].
     pace_t: f64,
     /// Sum of the applied radar updates' normalised innovation squares (3 dof each).
     nis_sum: f64,
@@ -781,8 +783,8 @@ impl Rio {
     }
 
     /// Walking-pace bound ([`RioConfig::pace_std`]): when the filter is less sure of its
-    /// horizontal speed than the bound's deviation, "horizontal speed = the pace" (the speed it
-    /// held after its last radar update) with that deviation, along its own velocity's
+    /// horizontal speed than the bound's deviation and the pace's own, "horizontal speed = the
+    /// pace" (the speed it held after its aids) with that deviation, along its own velocity's
     /// direction, heading kept out of the gain as for radar updates. Not for ground vehicles,
     /// nor without a pace (none yet, or forgotten: [`Rio::forget_pace`], a rest), nor below
     /// [`PACE_MIN`], nor when the filter's own horizontal velocity is too small to give a
