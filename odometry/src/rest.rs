@@ -33,6 +33,12 @@
 //! came from a radar frame, and at the very start a ghost consensus has no prior to stop it). A
 //! start in motion ends it at once: the IMU is not still, or two frames in a row see the motion.
 //!
+//! A walker's stop is the other exception ([`RestConfig::gait_accel_std`]): a walker's IMU is
+//! never still while it walks, so a still IMU within [`RestConfig::gait_memory_s`] of a gait
+//! starts a rest through frames without a verdict, and the filter's velocity does not refute a
+//! rest that begins then ([`RestDetector::stopped_walker`]). The runner turns this off for
+//! ground vehicles.
+//!
 //! While at rest the filter takes zero-velocity, position-hold and zero-rate pseudo-measurements
 //! ([`crate::rio::Rio::zero_velocity`], [`crate::rio::Rio::hold_position`],
 //! [`crate::rio::Rio::zero_rate`]) every [`RestConfig::update_period_s`]: the velocity stays zero,
@@ -122,13 +128,14 @@ pub struct RestConfig {
     /// Specific-force spread \[m/s^2\] (sqrt of the covariance trace over the stillness
     /// window) that only a walker's gait reaches: each step swings the specific force by
     /// 2-5 m/s^2, where a robot or a car on a floor or a road stays well under 1.
+    /// `f64::INFINITY`: no gait is ever seen, and no rest is taken for a walker's stop.
     pub gait_accel_std: f64,
     /// How long after the IMU last showed a gait \[s\] a still IMU is taken for a walker who
     /// stopped ([`RestConfig::gait_accel_std`]): it may then start a rest where the radar gives
     /// no verdict (a sparse scene: the rest cannot wait for a frame to call it still), and the
     /// filter's velocity does not refute that rest, nor one a frame called still (a walker's
     /// IMU is never still while it walks: a velocity the filter still holds is its error, not a
-    /// smooth cruise). `f64::INFINITY` gait spread: never.
+    /// smooth cruise).
     pub gait_memory_s: f64,
     /// How long the spread must last to be a gait \[s\] ([`RestConfig::gait_accel_std`]): a
     /// walk goes on for seconds, a bump or a braking does not.
