@@ -83,7 +83,8 @@ pub struct OdometryArgs {
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     radar_time_shift: f64,
     /// The rig is a ground vehicle (car, wheeled robot): its body frame's lateral and vertical
-    /// velocity are held at zero within 0.1 m/s at each radar frame (body frame: x forward, z up).
+    /// velocity are held at zero at each radar frame, within 0.01 m/s at standstill and 0.02 of
+    /// the forward speed in motion (body frame: x forward, z up).
     #[arg(long)]
     vehicle: bool,
     /// How long a radar frame that gives no velocity alone (too few points, no consensus) is kept

@@ -77,7 +77,8 @@ pub struct RunArgs {
     #[arg(long)]
     tum_predicted: bool,
     /// The rig is a ground vehicle: the Doppler filter holds the body frame's lateral and
-    /// vertical velocity at zero within 0.1 m/s (as `odometry --vehicle`).
+    /// vertical velocity at zero, within 0.01 m/s at standstill and 0.02 of the forward speed
+    /// in motion (as `odometry --vehicle`).
     #[arg(long)]
     vehicle: bool,
     /// The IMU's noise preset for the filter: mti1 (Xsens MTi-1 series), mti600 (MTi-600
@@ -327,7 +328,7 @@ pub fn run(a: RunArgs) -> Result<()> {
         )
     };
     if a.vehicle {
-        cfg.classical.rio.nonholonomic_std = milliego_odometry::offline::GROUND_VEHICLE_STD;
+        cfg.classical.rio = cfg.classical.rio.ground_vehicle();
     }
     cfg.imu_noise = a.imu_noise;
     cfg.imu_device = a.imu_device.clone().or(file.imu.device.clone());

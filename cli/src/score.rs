@@ -206,7 +206,7 @@ pub(crate) fn run_runtime(
         ..*classical
     };
     if vehicle {
-        cfg.classical.rio.nonholonomic_std = milliego_odometry::offline::GROUND_VEHICLE_STD;
+        cfg.classical.rio = cfg.classical.rio.ground_vehicle();
     }
     let input = Input::Session {
         dir: dir.to_path_buf(),

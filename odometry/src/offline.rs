@@ -112,17 +112,12 @@ pub enum TimeOffsetMode {
 
 impl OfflineConfig {
     /// For a ground vehicle (car, wheeled robot on a floor): its lateral and vertical velocity
-    /// are zero within [`GROUND_VEHICLE_STD`] in the session's body frame
-    /// ([`RioConfig::nonholonomic_std`]).
+    /// are held at zero in the session's body frame ([`RioConfig::ground_vehicle`]).
     pub fn ground_vehicle(mut self) -> Self {
-        self.rio.nonholonomic_std = GROUND_VEHICLE_STD;
+        self.rio = self.rio.ground_vehicle();
         self
     }
 }
-
-/// Deviation of a ground vehicle's lateral and vertical velocity from zero \[m/s\] (tyre slip,
-/// suspension, bumps).
-pub const GROUND_VEHICLE_STD: f64 = 0.1;
 
 impl TimeOffsetMode {
     /// Initial uncertainty of the offset when it is estimated and none was given \[s\]: the

@@ -53,6 +53,17 @@ pub const PACE_TAU_S: f64 = 0.5;
 /// direction.
 pub const PACE_DIRECTION_MIN: f64 = 0.1;
 
+/// Deviation of a ground vehicle's lateral and vertical velocity from zero at standstill \[m/s\]
+/// ([`RioConfig::ground_vehicle`]): a floor's or a road's unevenness, the suspension. (It was
+/// 0.1 m/s, without the growth with speed, until 2026-12-07: a third of a 0.3 m/s robot's
+/// speed; docs/odometry.md, "Ground vehicles".)
+pub const GROUND_VEHICLE_STD: f64 = 0.01;
+
+/// Growth of that deviation with the forward speed \[rad\] ([`RioConfig::nonholonomic_angle`]):
+/// a tyre's slip angle and the vehicle frame's misalignment, about a degree (0.17 m/s sideways
+/// for a car at 10 m/s).
+pub const GROUND_VEHICLE_ANGLE: f64 = 0.02;
+
 /// Noise densities and initial uncertainties.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RioConfig {
@@ -142,9 +153,17 @@ pub struct RioConfig {
     /// the attitude on a sparse outdoor walk, docs/odometry.md.)
     pub gap_accel_std: f64,
     /// Ground vehicle constraint \[m/s\]: at each radar frame the vehicle frame's lateral and
-    /// vertical velocity are 0 with this deviation (a car does not slide sideways or lift off;
+    /// vertical velocity are 0 with this deviation at standstill, growing with the forward speed
+    /// by [`RioConfig::nonholonomic_angle`] (a car does not slide sideways or lift off;
     /// [`Rio::set_vehicle_frame`] places that frame); `f64::INFINITY`: not a ground vehicle.
+    /// [`RioConfig::ground_vehicle`] sets both to [`GROUND_VEHICLE_STD`] and
+    /// [`GROUND_VEHICLE_ANGLE`].
     pub nonholonomic_std: f64,
+    /// How far the ground vehicle constraint's deviation grows with the vehicle frame's forward
+    /// speed `u` \[rad\]: the lateral and vertical deviation is
+    /// `sqrt(nonholonomic_std^2 + (nonholonomic_angle u)^2)`, the velocity a slip angle or a
+    /// misaligned vehicle frame of that angle gives at that speed.
+    pub nonholonomic_angle: f64,
     /// Radar noise adaptation: the number of applied radar updates \[frames\] over which the
     /// filter estimates one scale `alpha` of the ego-velocity covariances it is given (their
     /// covariance becomes `alpha C`), by recursive maximum likelihood on the innovations
@@ -255,6 +274,15 @@ impl core::str::FromStr for ImuNoise {
 }
 
 impl RioConfig {
+    /// For a ground vehicle (car, wheeled robot on a floor): its lateral and vertical velocity
+    /// in the vehicle frame are zero within [`GROUND_VEHICLE_STD`] at standstill, growing with
+    /// its forward speed by [`GROUND_VEHICLE_ANGLE`] ([`RioConfig::nonholonomic_std`]).
+    pub fn ground_vehicle(mut self) -> Self {
+        self.nonholonomic_std = GROUND_VEHICLE_STD;
+        self.nonholonomic_angle = GROUND_VEHICLE_ANGLE;
+        self
+    }
+
     /// This configuration with the shared rounding state's correlation time `seconds` \[s\]
     /// ([`RioConfig::radar_error_time_s`]); 0, a negative or a non-finite value other than
     /// infinity turns the state off ([`RioConfig::radar_error_state`]).
@@ -328,6 +356,7 @@ impl Default for RioConfig {
             time_offset_std: 0.0,
             time_offset_walk: 1e-4,
             nonholonomic_std: f64::INFINITY,
+            nonholonomic_angle: 0.0,
             gap_accel_std: 1.0,
             radar_noise_window: 300.0,
             radar_noise_scale_bounds: [1.0, 10.0],
@@ -1056,7 +1085,10 @@ impl Rio {
         // Row 0 (forward) is free: a zero row with zero innovation changes nothing.
         h.row_mut(0).fill(0.0);
         let y = Vector3::new(0.0, -pred.y, -pred.z);
-        let rm = Matrix3::from_diagonal(&Vector3::new(1.0, std * std, std * std));
+        // A slip angle (or a vehicle frame misaligned by it) turns part of the forward speed
+        // sideways: the deviation grows with the speed.
+        let var = std * std + (self.cfg.nonholonomic_angle * pred.x).powi(2);
+        let rm = Matrix3::from_diagonal(&Vector3::new(1.0, var, var));
         let s = h * self.p * h.transpose() + rm;
         let Some(si) = s.try_inverse() else {
             self.counters.nonholonomic_gated += 1;

@@ -469,7 +469,7 @@ fn the_rounding_likelihood_goes_to_the_rigs_its_rule_names() {
     use milliego_odometry::runner::RoundingRule;
     let walk = ClassicalConfig::default();
     let mut car = ClassicalConfig::default();
-    car.rio.nonholonomic_std = milliego_odometry::offline::GROUND_VEHICLE_STD;
+    car.rio = car.rio.ground_vehicle();
     assert_eq!(walk.rounding_likelihood, RoundingRule::Never, "the default");
     for (rule, walk_too, car_too) in [
         (RoundingRule::Never, false, false),
