@@ -83,6 +83,15 @@ pub struct FilterSummary {
     /// "Horizontal speed = the pace" bounds where the filter had lost its speed after the radar
     /// last measured it (not for ground vehicles).
     pub pace_bounds: u64,
+    /// Ground vehicle constraints applied ("sideways and vertical velocity 0" at each radar
+    /// frame; `--vehicle` only).
+    #[serde(default)]
+    pub ground_vehicle_applied: u64,
+    /// Ground vehicle constraints beyond their gate (not applied): many of them say the vehicle
+    /// slid, or its body frame sits off the point that does not slide sideways (docs/odometry.md,
+    /// "How tight the ground vehicle constraint is").
+    #[serde(default)]
+    pub ground_vehicle_gated: u64,
     /// Barometric heights applied.
     pub baro_updates: u64,
     /// Barometric heights rejected (not finite, or beyond the 99.9% gate).
@@ -144,6 +153,8 @@ impl From<milliego_odometry::rio::RioCounters> for FilterSummary {
             vertical_bounds: c.vertical_bounds,
             horizontal_bounds: c.horizontal_bounds,
             pace_bounds: c.pace_bounds,
+            ground_vehicle_applied: c.nonholonomic_updates,
+            ground_vehicle_gated: c.nonholonomic_gated,
             baro_updates: c.baro_updates,
             baro_rejected: c.baro_rejected,
             baro_reanchors: c.baro_reanchors,

@@ -193,8 +193,16 @@ fn offline_run_reproduces_milliego_odometry_for_a_ground_vehicle() {
     let cfg = OfflineConfig::default().ground_vehicle();
     let r = run_offline(&s, &cfg).unwrap();
     assert!(r.nonholonomic.0 > 50, "{:?}", r.nonholonomic);
-    runtime_equals_odometry_with(&d, &s, &OfflineConfig::default());
-    runtime_equals_odometry_with(&d, &s, &cfg);
+    let plain = runtime_equals_odometry_with(&d, &s, &OfflineConfig::default());
+    let car = runtime_equals_odometry_with(&d, &s, &cfg);
+    // The summary counts the constraint as `milliego odometry` does, and only where asked.
+    let f = car.report.filter.expect("the Doppler filter's counters");
+    assert_eq!(
+        (f.ground_vehicle_applied, f.ground_vehicle_gated),
+        r.nonholonomic
+    );
+    let f = plain.report.filter.expect("the Doppler filter's counters");
+    assert_eq!((f.ground_vehicle_applied, f.ground_vehicle_gated), (0, 0));
 }
 
 #[test]
