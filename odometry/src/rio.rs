@@ -56,7 +56,7 @@ pub const PACE_DIRECTION_MIN: f64 = 0.1;
 /// Deviation of a ground vehicle's lateral and vertical velocity from zero at standstill \[m/s\]
 /// ([`RioConfig::ground_vehicle`]): a floor's or a road's unevenness, the suspension. (It was
 /// 0.1 m/s, without the growth with speed, until 2026-12-07: a third of a 0.3 m/s robot's
-/// speed; docs/odometry.md, "Ground vehicles".)
+/// speed; docs/odometry.md, "How tight the ground vehicle constraint is".)
 pub const GROUND_VEHICLE_STD: f64 = 0.01;
 
 /// Growth of that deviation with the forward speed \[rad\] ([`RioConfig::nonholonomic_angle`]):
