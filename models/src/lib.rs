@@ -33,9 +33,16 @@ pub const STATE_ROWS: usize = 4;
 /// How far two int8 runs of one window may differ, per pose component (\[m\] or \[deg\]), when
 /// different engines or kernels make them (tract against onnxruntime, x86 against aarch64): they
 /// round the int8 intermediates differently (the requantized outputs of the convolutions and of
-/// the quantized matrix products), and the LSTMs carry that on. The bound for int8 against fp32 as
-/// well. On the shipped compact model's golden windows tract and onnxruntime differ by up to 0.03.
+/// the quantized matrix products), and the LSTMs carry that on. On the shipped compact model's
+/// golden windows tract and onnxruntime differ by up to 0.03.
 pub const INT8_TOLERANCE: f32 = 5e-2;
+/// How far an int8 file's pose may be from the fp32 file it was quantized from, per pose component
+/// (\[m\] or \[deg\]), on one window: the quantization's own error, which a broken quantization
+/// (wrong scales, a misread zero point) exceeds by far. The shipped compact files differ by up to
+/// 0.052 deg of yaw on their golden windows in tract (0.060 in onnxruntime; the earlier v1-trained
+/// files by 0.060 in onnxruntime too). What int8 costs in trajectory error is measured on the
+/// validation sets instead (docs/model.md: int8 within 5% of fp32).
+pub const INT8_VS_FP32_TOLERANCE: f32 = 0.1;
 
 /// What the exporter writes into the ONNX `metadata_props` under the key `milliego` (JSON).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

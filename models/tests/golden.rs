@@ -150,7 +150,7 @@ fn tract_matches_onnxruntime_on_the_golden_windows() {
             // And against fp32: the int8 model must stay close to the model it came from.
             let fp = f32s(&st, &format!("pose_fp32_{k}"));
             assert!(
-                max_abs(&pose, &fp) <= milliego_models::INT8_TOLERANCE,
+                max_abs(&pose, &fp) <= milliego_models::INT8_VS_FP32_TOLERANCE,
                 "{file} window {k}: {pose:?} vs fp32 {fp:?}"
             );
         }
