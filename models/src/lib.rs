@@ -41,7 +41,7 @@ pub const INT8_TOLERANCE: f32 = 5e-2;
 /// (wrong scales, a misread zero point) exceeds by far. The shipped compact files differ by up to
 /// 0.052 deg of yaw on their golden windows in tract (0.060 in onnxruntime; the earlier v1-trained
 /// files by 0.060 in onnxruntime too). What int8 costs in trajectory error is measured on the
-/// validation sets instead (docs/model.md: int8 within 5% of fp32).
+/// benchmark instead (README "Accuracy": the int8 rows beside the fp32 ones).
 pub const INT8_VS_FP32_TOLERANCE: f32 = 0.1;
 
 /// What the exporter writes into the ONNX `metadata_props` under the key `milliego` (JSON).
