@@ -101,8 +101,12 @@ pub struct LearnedConfig {
     pub known_share: f64,
 }
 
-/// Radar updates over an interval for it to calibrate the scale ([`LearnedConfig::calibrate_scale`]).
-pub const SCALE_COVERS: u64 = 4;
+/// Radar updates over an interval for it to calibrate the scale, the offset and the noise
+/// ([`LearnedConfig::calibrate_scale`], [`LearnedConfig::calibrate_offset`],
+/// [`LearnedConfig::adapt_noise`]). Chosen on the validation sets (docs/model.md, "Fusion"): 2
+/// lets a sparse outdoor scene, whose frames rarely give 4 velocities in a keyframe interval,
+/// measure the network too.
+pub const SCALE_COVERS: u64 = 2;
 /// Forgetting factor of the scale calibration per interval (0.98: ~50 intervals, 12 s at 4 Hz).
 pub const SCALE_FORGET: f64 = 0.98;
 /// Squared distance \[m^2\] the calibration must have seen before it applies.
