@@ -115,6 +115,53 @@ fn within_gate_and_right_stays(lasting: &OfflineResult, n: usize, right: &Offlin
     );
 }
 
+/// A MEMS part's filter (it leans on the network more than an Xsens preset's) on `s`: Doppler
+/// alone, with `right` motions, and with `lasting` ones with their deviation widened by what the
+/// radar measured (the default) and not; each run with its ATE \[m\].
+struct LastingError {
+    doppler: (OfflineResult, f64),
+    right: (OfflineResult, f64),
+    widened: (OfflineResult, f64),
+    plain: (OfflineResult, f64),
+}
+
+fn lasting_error_runs(
+    s: &Session,
+    right: &[RelativeMotion],
+    lasting: &[RelativeMotion],
+) -> LastingError {
+    let widened = LearnedConfig::default();
+    assert!(widened.adapt_noise, "on by default");
+    let plain = LearnedConfig {
+        adapt_noise: false,
+        ..widened
+    };
+    let scored = |m: &[RelativeMotion], learned| {
+        let r = with_mems(s, Estimator::Doppler, m, learned);
+        let a = ate(s, &r);
+        (r, a)
+    };
+    let runs = LastingError {
+        doppler: scored(&[], widened),
+        right: scored(right, widened),
+        widened: scored(lasting, widened),
+        plain: scored(lasting, plain),
+    };
+    println!(
+        "{} radar updates, {} motions; ATE: Doppler {:.3} m, right motions {:.3} m (factor {:.2}), lasting error widened {:.3} m (factor {:.2}), not {:.3} m",
+        runs.doppler.0.updates,
+        right.len(),
+        runs.doppler.1,
+        runs.right.1,
+        runs.right.0.learned_noise_factor,
+        runs.widened.1,
+        runs.widened.0.learned_noise_factor,
+        runs.plain.1
+    );
+    within_gate_and_right_stays(&runs.widened.0, lasting.len(), &runs.right.0);
+    runs
+}
+
 /// `m` with a steady velocity error `v` \[m/s, body frame at `from`\] added to every motion.
 fn off_by(m: &[RelativeMotion], v: Vector3<f64>) -> Vec<RelativeMotion> {
     m.iter()
@@ -273,29 +320,14 @@ fn a_network_error_that_lasts_widens_the_deviation_once_the_radar_has_measured_i
     let (_d, s, _, times) = walk(Family::Office, MotionKind::Handheld, 3, 20.0);
     let right = motions(&s, &times, 1.0);
     let lasting = off_by(&right, Vector3::new(0.0, 0.8, 0.0));
-    let widened = LearnedConfig::default();
-    assert!(widened.adapt_noise, "on by default");
-    let plain = LearnedConfig {
-        adapt_noise: false,
-        ..widened
-    };
     // On a MEMS part's filter, which leans on the network more (an Xsens preset's filter knows
     // this walk's motion well enough that the error costs it 0.057 against 0.048 m unwidened).
-    let doppler = with_mems(&s, Estimator::Doppler, &[], widened);
-    let r_right = with_mems(&s, Estimator::Doppler, &right, widened);
-    let r_on = with_mems(&s, Estimator::Doppler, &lasting, widened);
-    let r_off = with_mems(&s, Estimator::Doppler, &lasting, plain);
-    let (a_dop, a_right, a_on, a_off) = (
-        ate(&s, &doppler),
-        ate(&s, &r_right),
-        ate(&s, &r_on),
-        ate(&s, &r_off),
-    );
-    println!(
-        "ATE: Doppler {a_dop:.3} m, right motions {a_right:.3} m (factor {:.2}), lasting error widened {a_on:.3} m (factor {:.2}), not {a_off:.3} m",
-        r_right.learned_noise_factor, r_on.learned_noise_factor
-    );
-    within_gate_and_right_stays(&r_on, lasting.len(), &r_right);
+    let LastingError {
+        doppler: (_, a_dop),
+        widened: (r_on, a_on),
+        plain: (r_off, a_off),
+        ..
+    } = lasting_error_runs(&s, &right, &lasting);
     // The error is about the stated deviation on its axis (0.2 m per 0.25 s interval), and
     // correlated up to the clamp: a factor of several, at most the clamp's.
     let full = (1.0 + NOISE_RHO_MAX) / (1.0 - NOISE_RHO_MAX);
@@ -521,37 +553,22 @@ fn a_sparse_scenes_radar_measures_the_networks_lasting_error_too() {
     // too and its deviation widened. Counting only intervals with 4, the factor stayed at 1.0-1.06
     // on these walks and the filter trusted the error as stated.
     for seed in [1, 2, 3] {
-        let (_d, s, doppler, times) = walk(Family::Outdoor, MotionKind::Handheld, seed, 30.0);
+        let (_d, s, _, times) = walk(Family::Outdoor, MotionKind::Handheld, seed, 30.0);
         let right = motions(&s, &times, 1.0);
         let lasting = off_by(&right, Vector3::new(0.0, 0.8, 0.0));
-        let widened = LearnedConfig::default();
-        let plain = LearnedConfig {
-            adapt_noise: false,
-            ..widened
-        };
-        let r_right = with_mems(&s, Estimator::Doppler, &right, widened);
-        let r_on = with_mems(&s, Estimator::Doppler, &lasting, widened);
-        let r_off = with_mems(&s, Estimator::Doppler, &lasting, plain);
-        let (a_dop, a_right, a_on, a_off) = (
-            ate(&s, &doppler),
-            ate(&s, &r_right),
-            ate(&s, &r_on),
-            ate(&s, &r_off),
-        );
-        println!(
-            "seed {seed}: {} radar updates over {} intervals; ATE Doppler {a_dop:.3} m, right motions {a_right:.3} m (factor {:.2}), lasting error widened {a_on:.3} m (factor {:.2}), not {a_off:.3} m",
-            doppler.updates,
-            right.len(),
-            r_right.learned_noise_factor,
-            r_on.learned_noise_factor,
-        );
+        println!("seed {seed}:");
+        let LastingError {
+            doppler: (doppler, a_dop),
+            widened: (r_on, a_on),
+            plain: (_, a_off),
+            ..
+        } = lasting_error_runs(&s, &right, &lasting);
         assert!(
             (doppler.updates as usize) < 2 * right.len(),
             "seed {seed}: a sparse scene ({} radar updates over {} intervals)",
             doppler.updates,
             right.len()
         );
-        within_gate_and_right_stays(&r_on, lasting.len(), &r_right);
         assert!(
             r_on.learned_noise_factor > 3.0,
             "seed {seed}: lasting error: factor {}",
